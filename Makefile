@@ -1,0 +1,37 @@
+# omnijax: `make demo` and `make test` work on a fresh machine with only Python 3.11.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed-stamp
+OUT    ?= out
+
+.PHONY: demo test test-slow bench clean help
+
+help:
+	@echo "make demo       create .venv, install, run the main job on the built-in synthetic scene"
+	@echo "make test       create .venv, install, run the test suite (what CI runs)"
+	@echo "make test-slow  the long statistical tests as well"
+	@echo "make bench      speed benchmarks, pinned to one core"
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -c 'import sys; assert sys.version_info[:2] == (3, 11), "omnijax needs Python 3.11, found " + sys.version'
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/omnijax validate --config configs/paper.toml --out $(OUT)/validate
+	@echo "demo outputs: $(OUT)/validate (report.json and PNG maps)"
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -m "not slow"
+
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest
+
+bench: $(STAMP)
+	taskset -c 0 $(BIN)/python benchmarks/bench_uncertainty.py
+
+clean:
+	rm -rf $(VENV) $(OUT) .pytest_cache .hypothesis

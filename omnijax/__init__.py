@@ -1,0 +1,73 @@
+"""omnijax: jitted JAX kernels of the dual-camera surveillance system (Greiffenhagen et al., CVPR 2000).
+
+Pure functions of arrays and config PyTrees: camera models, chromaticity, the
+pointing geometry, its uncertainty and the zoom. ``optimise`` and ``runtime``
+import this package, never the reverse.
+
+Importing omnijax enables JAX's float64 (geometry, uncertainty and Monte Carlo
+compare at 1e-9); per-pixel kernels ask for float32 explicitly.
+"""
+
+import jax as _jax
+
+_jax.config.update("jax_enable_x64", True)
+
+from ._aim import Aim, aim, aim_with_covariance  # noqa: E402
+from ._camera import (  # noqa: E402
+    PROFILES,
+    Equidistant,
+    Equisolid,
+    OCamCalib,
+    OCamCalibFile,
+    OmniCamera,
+    Paraboloid,
+    RadialProfile,
+    parse_ocamcalib,
+)
+from ._chroma import chromaticity, chromaticity_covariance  # noqa: E402
+from ._config import (  # noqa: E402
+    INPUT_NAMES,
+    INPUT_UNITS,
+    ConfigError,
+    Detection,
+    Foveal,
+    Lens,
+    Person,
+    Rig,
+    Room,
+    Sigmas,
+    parse_rig,
+)
+from ._geometry import (  # noqa: E402
+    D_P_MIN,
+    PHI_FLOOR_MAX,
+    Pointing,
+    floor_radius,
+    foveal_offsets,
+    head_image_radius,
+    image_to_floor,
+    world_to_image,
+    point_image_radius,
+    pointing,
+)
+from ._uncertainty import (  # noqa: E402
+    METHODS,
+    OUTPUT_NAMES,
+    MonteCarloCovariance,
+    PointingCovariance,
+    gum_second_order,
+    pointing_covariance,
+    pointing_covariance_mc,
+    pointing_outputs,
+)
+from ._zoom import (  # noqa: E402
+    ZoomChoice,
+    choose_zoom,
+    containment_probability,
+    face_pixels,
+    head_half_size,
+    paper_fov,
+    rectangle_probability,
+)
+
+__all__ = [n for n in dir() if not n.startswith("_")]

@@ -1,0 +1,410 @@
+"""Typed rig configuration: a TOML schema (validated once, at the edge) and the PyTrees kernels take.
+
+The schema (:class:`RigFile` and its sections) mirrors the TOML file key for key,
+with units in the key names where they are not SI (``theta_c_deg``). Pydantic
+checks types, ranges and unknown keys; :func:`parse_rig` turns a validated mapping
+into :class:`Rig`, an immutable ``equinox.Module`` whose numbers are arrays (so a
+new ``D_c`` does not recompile) and whose modes and sizes are static fields.
+
+Every failure is a :class:`ConfigError` with one line naming the key and what was
+expected.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from typing import Annotated, Any, Literal
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pydantic
+from annotated_types import Len
+from jaxtyping import Array, Float
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from ._camera import OCamCalib, OmniCamera, PROFILES, parse_ocamcalib
+
+# --------------------------------------------------------------------------------------
+# Kernel-side types
+# --------------------------------------------------------------------------------------
+
+#: Order of the uncertain inputs of the pointing geometry (DESIGN.md section 4, eq 13-14).
+INPUT_NAMES: tuple[str, ...] = ("r_f", "theta_f", "H_o", "H_f", "D_c", "theta_c", "r_m", "H_p", "R_h")
+#: Units of the inputs, as echoed in reports.
+INPUT_UNITS: dict[str, str] = {
+    "r_f": "px", "theta_f": "rad", "H_o": "m", "H_f": "m", "D_c": "m",
+    "theta_c": "rad", "r_m": "px", "H_p": "m", "R_h": "m",
+}
+
+
+class ConfigError(ValueError):
+    """A rig or scenario file that does not describe a usable set-up (one-line message)."""
+
+
+class Lens(eqx.Module):
+    """The PTZ lens: horizontal angle of view at tabulated zoom factors, and the sensor's size.
+
+    Between table entries ``log tan(fov_h / 2)`` is interpolated linearly in
+    ``log zoom`` (exact for an ideal zoom lens, where ``tan(fov / 2)`` is ``1 / zoom``).
+    """
+
+    zoom: Float[Array, " k"]
+    fov_h: Float[Array, " k"]
+    zoom_range: Float[Array, "2"]
+    image_size: tuple[int, int] = eqx.field(static=True)
+
+    @property
+    def aspect(self) -> float:
+        """Height over width of the foveal image."""
+        return self.image_size[1] / self.image_size[0]
+
+    def fov(self, zoom) -> tuple[Array, Array]:
+        """Horizontal and vertical angle of view (rad) at ``zoom`` (within the table)."""
+        t = jnp.exp(jnp.interp(jnp.log(zoom), jnp.log(self.zoom), jnp.log(jnp.tan(0.5 * self.fov_h))))
+        return 2.0 * jnp.arctan(t), 2.0 * jnp.arctan(t * self.aspect)
+
+    def zoom_for_tan_half_fov_h(self, t) -> Array:
+        """Zoom factor whose ``tan(fov_h / 2)`` is ``t`` (table ends beyond the table)."""
+        log_t = jnp.log(jnp.tan(0.5 * self.fov_h))
+        return jnp.exp(jnp.interp(-jnp.log(t), -log_t, jnp.log(self.zoom)))
+
+    def clamp(self, zoom) -> Array:
+        """``zoom`` clamped to the device's zoom range."""
+        return jnp.clip(zoom, self.zoom_range[0], self.zoom_range[1])
+
+
+class Foveal(eqx.Module):
+    """The pan-tilt-zoom camera: placement (``D_c``, ``theta_c``, ``H_f``), limits and lens."""
+
+    D_c: Float[Array, ""]
+    theta_c: Float[Array, ""]
+    H_f: Float[Array, ""]
+    pan_limits: Float[Array, "2"]
+    tilt_limits: Float[Array, "2"]
+    lens: Lens
+
+
+class Person(eqx.Module):
+    """Person priors: height ``H_p``, head radius ``R_h``, shoulder width (all metres)."""
+
+    H_p: Float[Array, ""]
+    R_h: Float[Array, ""]
+    shoulder_width: Float[Array, ""]
+
+
+class Sigmas(eqx.Module):
+    """Standard deviations of the rig's calibration and of the person priors (SI, px for ``r_m``)."""
+
+    H_o: Float[Array, ""]
+    H_f: Float[Array, ""]
+    D_c: Float[Array, ""]
+    theta_c: Float[Array, ""]
+    r_m: Float[Array, ""]
+    H_p: Float[Array, ""]
+    R_h: Float[Array, ""]
+
+
+class Detection(eqx.Module):
+    """Detection settings: sensor noise, rates, and the default per-detection sigmas."""
+
+    sensor_sigma: Float[Array, ""]
+    x_f: Float[Array, ""]
+    x_m: Float[Array, ""]
+    sigma_r_f: Float[Array, ""]
+    sigma_theta_f: Float[Array, ""]
+
+
+class Room(eqx.Module):
+    """Floor region: outline polygon and excluded zones (metres, world frame)."""
+
+    outline: Float[Array, "n 2"]
+    exclude: tuple[Float[Array, "m 2"], ...]
+
+    def contains(self, X, Y) -> Array:
+        """Whether floor points (X, Y) lie inside the outline and outside every excluded zone."""
+        inside = _in_polygon(self.outline, X, Y)
+        for zone in self.exclude:
+            inside = inside & ~_in_polygon(zone, X, Y)
+        return inside
+
+
+def _in_polygon(poly: Float[Array, "n 2"], X, Y) -> Array:
+    """Even-odd rule: a horizontal ray from (X, Y) crosses the polygon's edges an odd number of times."""
+    X, Y = jnp.asarray(X)[..., None], jnp.asarray(Y)[..., None]
+    x0, y0 = poly[:, 0], poly[:, 1]
+    x1, y1 = jnp.roll(x0, -1), jnp.roll(y0, -1)
+    straddles = (y0 > Y) != (y1 > Y)
+    dy = jnp.where(straddles, y1 - y0, 1.0)
+    x_cross = x0 + (Y - y0) * (x1 - x0) / dy
+    return (jnp.sum(straddles & (X < x_cross), axis=-1) % 2) == 1
+
+
+class Rig(eqx.Module):
+    """A whole dual-camera set-up: what every kernel of omnijax takes."""
+
+    omni: OmniCamera
+    foveal: Foveal
+    person: Person
+    sigmas: Sigmas
+    detection: Detection
+    room: Room
+    p_contain: Float[Array, ""]
+    zoom_rule: Literal["paper", "calibrated"] = eqx.field(static=True)
+
+    def input_mean(self, r_f, theta_f) -> Float[Array, "*b 9"]:
+        """The input vector x of the pointing geometry, in :data:`INPUT_NAMES` order.
+
+        ``r_f`` (px) and ``theta_f`` (rad) may be arrays of one shape; the rig's
+        values broadcast to it.
+        """
+        r_f, theta_f = jnp.broadcast_arrays(jnp.asarray(r_f, float), jnp.asarray(theta_f, float))
+        rig = (self.omni.H_o, self.foveal.H_f, self.foveal.D_c, self.foveal.theta_c,
+               self.omni.r_m, self.person.H_p, self.person.R_h)
+        parts = [r_f, theta_f] + [jnp.broadcast_to(v, r_f.shape) for v in rig]
+        return jnp.stack(parts, axis=-1)
+
+    def input_sigma(self, sigma_r_f=None, sigma_theta_f=None) -> Float[Array, "*b 9"]:
+        """Standard deviations of x; the detection's defaults unless given (may be arrays)."""
+        s_r = self.detection.sigma_r_f if sigma_r_f is None else sigma_r_f
+        s_t = self.detection.sigma_theta_f if sigma_theta_f is None else sigma_theta_f
+        s_r, s_t = jnp.broadcast_arrays(jnp.asarray(s_r, float), jnp.asarray(s_t, float))
+        s = self.sigmas
+        rig = (s.H_o, s.H_f, s.D_c, s.theta_c, s.r_m, s.H_p, s.R_h)
+        return jnp.stack([s_r, s_t] + [jnp.broadcast_to(v, s_r.shape) for v in rig], axis=-1)
+
+
+# --------------------------------------------------------------------------------------
+# TOML schema
+# --------------------------------------------------------------------------------------
+
+Pos = Annotated[float, Field(gt=0)]
+NonNeg = Annotated[float, Field(ge=0)]
+Prob = Annotated[float, Field(gt=0, lt=1)]
+Pair = Annotated[list[float], Len(2, 2)]
+PosPair = Annotated[list[Annotated[float, Field(gt=0)]], Len(2, 2)]
+Size = Annotated[list[Annotated[int, Field(gt=0)]], Len(2, 2)]
+Point = Annotated[list[float], Len(2, 2)]
+Polygon = Annotated[list[Point], Len(3)]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+
+class OmniSection(_Section):
+    model: Literal["paraboloid", "equidistant", "equisolid", "ocamcalib"]
+    H_o: Pos = Field(description="height of the mirror focus / lens centre above the floor, m")
+    sigma_H_o: NonNeg
+    image_size: Size | None = Field(None, description="width, height in px (ocamcalib: from the file)")
+    center: Pair | None = Field(None, description="image centre x_c, y_c in px (ocamcalib: from the file)")
+    r_m: Pos | None = Field(None, description="horizon radius (phi = 90 deg) in px (ocamcalib: from the file)")
+    sigma_r_m: NonNeg = 0.0
+    rim: Pos | None = Field(None, description="radius of the usable image circle, px")
+    fov_deg: Annotated[float, Field(gt=0, le=360)] | None = Field(
+        None, description="fisheye field of view; sets the rim when `rim` is absent"
+    )
+    calib_file: str | None = Field(None, description="ocamcalib: path of calib_results.txt")
+
+    @model_validator(mode="after")
+    def _model_keys(self):
+        if self.model == "ocamcalib":
+            if self.calib_file is None:
+                raise ValueError("calib_file is required for model = 'ocamcalib'")
+        else:
+            for key in ("image_size", "center", "r_m"):
+                if getattr(self, key) is None:
+                    raise ValueError(f"{key} is required for model = '{self.model}'")
+            if self.calib_file is not None:
+                raise ValueError("calib_file is only for model = 'ocamcalib'")
+        return self
+
+
+class LensSection(_Section):
+    zoom: Annotated[list[Annotated[float, Field(ge=1)]], Len(2)]
+    fov_h_deg: Annotated[list[Annotated[float, Field(gt=0, lt=180)]], Len(2)]
+
+    @model_validator(mode="after")
+    def _monotone(self):
+        if len(self.zoom) != len(self.fov_h_deg):
+            raise ValueError("zoom and fov_h_deg must have the same length")
+        if any(b <= a for a, b in zip(self.zoom, self.zoom[1:])):
+            raise ValueError("zoom must increase strictly")
+        if any(b >= a for a, b in zip(self.fov_h_deg, self.fov_h_deg[1:])):
+            raise ValueError("fov_h_deg must decrease strictly as zoom grows")
+        return self
+
+
+class FovealSection(_Section):
+    D_c: NonNeg = Field(description="floor distance from the omni axis to the PTZ, m")
+    sigma_D_c: NonNeg
+    theta_c_deg: float = Field(description="azimuth of the PTZ around the omni axis, deg")
+    sigma_theta_c_deg: NonNeg
+    H_f: Pos = Field(description="height of the PTZ's rotation centre, m")
+    sigma_H_f: NonNeg
+    pan_limits_deg: Pair
+    tilt_limits_deg: Pair
+    image_size: Size
+    zoom_range: PosPair
+    lens: LensSection
+
+    @model_validator(mode="after")
+    def _ranges(self):
+        for key in ("pan_limits_deg", "tilt_limits_deg", "zoom_range"):
+            lo, hi = getattr(self, key)
+            if not lo < hi:
+                raise ValueError(f"{key} must be [low, high] with low < high")
+        if self.zoom_range[0] < self.lens.zoom[0] or self.zoom_range[1] > self.lens.zoom[-1]:
+            raise ValueError(
+                f"zoom_range {self.zoom_range} must lie inside the lens table "
+                f"[{self.lens.zoom[0]}, {self.lens.zoom[-1]}]"
+            )
+        return self
+
+
+class PersonSection(_Section):
+    H_p: Pos = Field(description="person height, m")
+    sigma_H_p: NonNeg
+    R_h: Pos = Field(description="head radius, m")
+    sigma_R_h: NonNeg
+    shoulder_width: Pos
+
+    @model_validator(mode="after")
+    def _head(self):
+        if self.R_h >= self.H_p / 2:
+            raise ValueError("R_h must be less than half of H_p")
+        return self
+
+
+class DetectionSection(_Section):
+    sensor_sigma: Pos = Field(description="sensor noise per channel, grey levels")
+    x_f: Prob = Field(description="false-alarm rate per sector")
+    x_m: Prob = Field(description="miss rate per person")
+    sigma_r_f: Pos = Field(description="default sigma of the foot radius, px")
+    sigma_theta_f_deg: Pos = Field(description="default sigma of the foot azimuth, deg")
+
+
+class ZoomSection(_Section):
+    p_contain: Prob = Field(description="probability that the whole head is in the foveal frame")
+    rule: Literal["paper", "calibrated"] = "calibrated"
+
+
+class RoomSection(_Section):
+    outline: Polygon = Field(description="floor outline polygon [[x, y], ...] in m")
+    exclude: list[Polygon] = Field(default_factory=list, description="excluded floor zones")
+
+
+class RigFile(_Section):
+    omni: OmniSection
+    foveal: FovealSection
+    person: PersonSection
+    detection: DetectionSection
+    zoom: ZoomSection
+    room: RoomSection
+
+    @model_validator(mode="after")
+    def _heights(self):
+        if self.person.H_p >= self.omni.H_o:
+            raise ValueError(
+                f"person.H_p = {self.person.H_p} m must be below omni.H_o = {self.omni.H_o} m"
+            )
+        return self
+
+
+# --------------------------------------------------------------------------------------
+# Mapping -> Rig
+# --------------------------------------------------------------------------------------
+
+
+def _one_line(exc: pydantic.ValidationError, source: str) -> str:
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err["loc"])
+    msg = err["msg"].removeprefix("Value error, ")
+    if err["type"] == "missing":
+        msg = "missing key"
+    elif err["type"] == "extra_forbidden":
+        msg = "unknown key"
+    value = err.get("input")
+    shown = err["type"] not in ("missing", "extra_forbidden", "value_error") and not isinstance(value, dict)
+    got = f" (got {value!r})" if shown else ""
+    return f"{source}: {loc or '(top level)'}: {msg}{got}"
+
+
+def _a(x) -> Array:
+    return jnp.asarray(x, dtype=float)
+
+
+def _omni_camera(sec: OmniSection, read_text: Callable[[str], str] | None, source: str) -> OmniCamera:
+    if sec.model == "ocamcalib":
+        if read_text is None:
+            raise ConfigError(f"{source}: omni.calib_file: cannot read files here")
+        try:
+            calib = parse_ocamcalib(read_text(sec.calib_file))
+        except OSError as exc:
+            raise ConfigError(f"{source}: omni.calib_file: cannot read {sec.calib_file!r}: {exc.strerror}") from exc
+        except ValueError as exc:
+            raise ConfigError(f"{source}: omni.calib_file: {exc}") from exc
+        profile = OCamCalib(ss=_a(calib.ss), invpol=_a(calib.invpol), rho0=calib.horizon_radius)
+        width = calib.width + calib.crop_left + calib.crop_right
+        size = tuple(sec.image_size) if sec.image_size else (width, calib.height)
+        center = sec.center or [calib.center_col + calib.crop_left, calib.center_row]
+        r_m = sec.r_m or calib.horizon_radius
+        rim = sec.rim or calib.roi_max or r_m
+        affine = calib.affine
+    else:
+        profile = PROFILES[sec.model]()
+        size, center, r_m, affine = tuple(sec.image_size), sec.center, sec.r_m, (1.0, 0.0, 0.0)
+        if sec.rim is not None:
+            rim = sec.rim
+        elif sec.fov_deg is not None:
+            rim = float(r_m * profile.u(math.radians(sec.fov_deg) / 2))
+        else:
+            rim = r_m
+    return OmniCamera(
+        profile=profile, center=_a(center), r_m=_a(r_m), rim=_a(rim), H_o=_a(sec.H_o),
+        affine=_a(affine), image_size=(int(size[0]), int(size[1])),
+    )
+
+
+def parse_rig(
+    data: Mapping[str, Any], *, source: str = "config", read_text: Callable[[str], str] | None = None
+) -> Rig:
+    """Validate a parsed TOML mapping and build the :class:`Rig`.
+
+    ``read_text`` reads files the config names (the OCamCalib calibration), relative
+    to the config; it is the only I/O, and the caller provides it.
+    Raises :class:`ConfigError` with one line naming the key and what was expected.
+    """
+    try:
+        f = RigFile.model_validate(dict(data))
+    except pydantic.ValidationError as exc:
+        raise ConfigError(_one_line(exc, source)) from None
+    omni = _omni_camera(f.omni, read_text, source)
+    fo = f.foveal
+    lens = Lens(
+        zoom=_a(fo.lens.zoom), fov_h=_a(np.radians(fo.lens.fov_h_deg)),
+        zoom_range=_a(fo.zoom_range), image_size=(fo.image_size[0], fo.image_size[1]),
+    )
+    foveal = Foveal(
+        D_c=_a(fo.D_c), theta_c=_a(math.radians(fo.theta_c_deg)), H_f=_a(fo.H_f),
+        pan_limits=_a(np.radians(fo.pan_limits_deg)), tilt_limits=_a(np.radians(fo.tilt_limits_deg)),
+        lens=lens,
+    )
+    pe = f.person
+    person = Person(H_p=_a(pe.H_p), R_h=_a(pe.R_h), shoulder_width=_a(pe.shoulder_width))
+    sigmas = Sigmas(
+        H_o=_a(f.omni.sigma_H_o), H_f=_a(fo.sigma_H_f), D_c=_a(fo.sigma_D_c),
+        theta_c=_a(math.radians(fo.sigma_theta_c_deg)), r_m=_a(f.omni.sigma_r_m),
+        H_p=_a(pe.sigma_H_p), R_h=_a(pe.sigma_R_h),
+    )
+    de = f.detection
+    detection = Detection(
+        sensor_sigma=_a(de.sensor_sigma), x_f=_a(de.x_f), x_m=_a(de.x_m),
+        sigma_r_f=_a(de.sigma_r_f), sigma_theta_f=_a(math.radians(de.sigma_theta_f_deg)),
+    )
+    room = Room(outline=_a(f.room.outline), exclude=tuple(_a(p) for p in f.room.exclude))
+    return Rig(
+        omni=omni, foveal=foveal, person=person, sigmas=sigmas, detection=detection, room=room,
+        p_contain=_a(f.zoom.p_contain), zoom_rule=f.zoom.rule,
+    )

@@ -1,0 +1,33 @@
+"""Reading rig files from disk: the only place TOML and referenced files are read."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+from omnijax import ConfigError, Rig, parse_rig
+
+
+def read_toml(path: str | Path) -> dict:
+    """Parse a TOML file; a missing or malformed file is a one-line :class:`ConfigError`."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such config file") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a directory, expected a TOML config file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+
+
+def load_rig(path: str | Path) -> Rig:
+    """Load and validate a rig file; files it names are read relative to it."""
+    path = Path(path)
+    base = path.parent
+
+    def read_text(name: str) -> str:
+        return (base / name).read_text()
+
+    return parse_rig(read_toml(path), source=str(path), read_text=read_text)

@@ -1,0 +1,116 @@
+"""Figures (matplotlib, files only): the paper's figures 9 and 10 and what goes beyond them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.colors import SymLogNorm  # noqa: E402
+
+from omnijax import Rig, world_to_image  # noqa: E402
+
+from .validation import PtzMaps  # noqa: E402
+
+QUANTITY_LABEL = {
+    "sin_pan": r"var(sin pan)",
+    "tan_tilt": r"var(tan tilt)",
+    "pan": r"var(pan) [rad$^2$]",
+    "tilt": r"var(tilt) [rad$^2$]",
+}
+
+
+def draw_rig(ax, rig: Rig, min_distance: float | None = None) -> None:
+    """Omni centre, PTZ foot, room outline and excluded zones, drawn in omni-image pixels."""
+    omni = rig.omni
+    cx, cy = np.asarray(omni.center)
+    ax.plot(cx, cy, "w+", ms=10, mew=2)
+    D_c, th = float(rig.foveal.D_c), float(rig.foveal.theta_c)
+    px, py = (float(v) for v in world_to_image(omni, D_c * np.cos(th), D_c * np.sin(th), 0.0))
+    ax.plot(px, py, "o", mfc="none", mec="w", ms=9, mew=2)
+    ax.annotate("PTZ", (px, py), xytext=(6, 6), textcoords="offset points", color="w", fontsize=8)
+    for poly, style in [(rig.room.outline, "w-")] + [(z, "w:") for z in rig.room.exclude]:
+        pts = np.asarray(poly)
+        loop = np.vstack([pts, pts[:1]])
+        t = np.linspace(0, 1, 50)[:, None]
+        dense = np.vstack([a + t * (b - a) for a, b in zip(loop[:-1], loop[1:])])
+        ix, iy = world_to_image(omni, dense[:, 0], dense[:, 1], 0.0)
+        ax.plot(np.asarray(ix), np.asarray(iy), style, lw=1)
+    if min_distance:
+        a = np.linspace(0, 2 * np.pi, 100)
+        ix, iy = world_to_image(omni, D_c * np.cos(th) + min_distance * np.cos(a),
+                                D_c * np.sin(th) + min_distance * np.sin(a), 0.0)
+        ax.plot(np.asarray(ix), np.asarray(iy), "w--", lw=0.8)
+
+
+def chroma_figure(maps: dict, path: Path, blue: float, sigma: float) -> None:
+    """Figure 9: eq 5's ``var r + var g + cov rg`` over (R, G) at fixed B, and Monte Carlo minus it."""
+    lv = maps["levels"]
+    ext = (lv[0], lv[-1], lv[0], lv[-1])
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), constrained_layout=True)
+    im = axes[0].imshow(maps["eq5"], origin="lower", extent=ext, cmap="viridis", norm="log")
+    fig.colorbar(im, ax=axes[0], label="variance (chromaticity units$^2$)")
+    axes[0].set_title(f"eq 5: var r + var g + cov rg  (B = {blue:g}, sigma = {sigma:g})")
+    d = maps["mc_minus_eq5"]
+    lim = np.abs(d).max()
+    im = axes[1].imshow(d, origin="lower", extent=ext, cmap="RdBu_r", vmin=-lim, vmax=lim)
+    fig.colorbar(im, ax=axes[1], label="Monte Carlo - eq 5 (chromaticity units$^2$)")
+    axes[1].set_title("difference: simulation - theory")
+    for ax in axes:
+        ax.set_xlabel("R (grey level)")
+        ax.set_ylabel("G (grey level)")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def ptz_figure(maps: PtzMaps, rig: Rig, quantity: str, path: Path, min_distance: float) -> None:
+    """Figure 10 and beyond: ``quantity``'s variance by the four methods and their differences.
+
+    Top row: log10 of the variance by autodiff, analytic (eq 13/14), second order
+    and Monte Carlo. Bottom row: relative differences in percent (symmetric log
+    colour scale) against Monte Carlo, and analytic against autodiff.
+    """
+    W, H = rig.omni.image_size
+    ext = (0, W, H, 0)
+    region = maps.region
+    v = maps.var
+    fig, axes = plt.subplots(2, 4, figsize=(19, 8.6), constrained_layout=True)
+    ref = np.log10(v["montecarlo"][quantity][region & (v["montecarlo"][quantity] > 0)])
+    lo, hi = np.percentile(ref, [1, 99.5]) if ref.size else (None, None)
+    for ax, method in zip(axes[0], ("autodiff", "analytic", "second_order", "montecarlo")):
+        var = v[method][quantity]
+        img = np.where(region & (var > 0), np.log10(np.where(var > 0, var, 1.0)), np.nan)
+        im = ax.imshow(img, extent=ext, cmap="viridis", vmin=lo, vmax=hi)
+        fig.colorbar(im, ax=ax, shrink=0.85, label=f"log10 {QUANTITY_LABEL[quantity]}")
+        ax.set_title(f"{method}")
+    diffs = [
+        ("analytic vs Monte Carlo", v["analytic"][quantity], v["montecarlo"][quantity]),
+        ("autodiff vs Monte Carlo", v["autodiff"][quantity], v["montecarlo"][quantity]),
+        ("second order vs Monte Carlo", v["second_order"][quantity], v["montecarlo"][quantity]),
+        ("analytic vs autodiff", v["analytic"][quantity], v["autodiff"][quantity]),
+    ]
+    norm = SymLogNorm(linthresh=1.0, vmin=-1000, vmax=1000)
+    for ax, (title, a, ref) in zip(axes[1], diffs):
+        rel = np.where(region, 100.0 * (a - ref) / ref, np.nan)
+        im = ax.imshow(rel, extent=ext, cmap="RdBu_r", norm=norm)
+        fig.colorbar(im, ax=ax, shrink=0.85, label="relative difference (%)")
+        ax.set_title(title)
+    rows, cols = np.nonzero(region)
+    pad = 3 * abs(maps.x[0, 1] - maps.x[0, 0])
+    x0, x1 = maps.x[0, cols.min()] - pad, maps.x[0, cols.max()] + pad
+    y0, y1 = maps.y[rows.min(), 0] - pad, maps.y[rows.max(), 0] + pad
+    for ax in axes.flat:
+        draw_rig(ax, rig, min_distance)
+        ax.set_xlim(max(x0, 0), min(x1, W))
+        ax.set_ylim(min(y1, H), max(y0, 0))
+        ax.set_xlabel("omni image x (px)")
+        ax.set_ylabel("omni image y (px)")
+        ax.set_facecolor("0.15")
+    fig.suptitle(f"{QUANTITY_LABEL[quantity]} over the room's floor, in omni-image coordinates "
+                 f"(+: omni axis; dashed: {min_distance:g} m around the PTZ's foot; grey: outside "
+                 f"the room or non-positive)")
+    fig.savefig(path, dpi=90)
+    plt.close(fig)

@@ -1,0 +1,11 @@
+"""One tolerance table for the whole suite: relative tolerances by dtype and by kind of comparison."""
+
+import numpy as np
+
+#: Exact identities (two ways of writing one formula), relative.
+EXACT = {np.float64: 1e-12, np.float32: 1e-5}
+#: Autodiff against a hand-derived closed form, relative (float64).
+CLOSED_FORM = 1e-9
+#: Autodiff against central finite differences (step ~ 1e-6 relative), relative.
+FINITE_DIFF = 1e-5
+#: Monte Carlo comparisons are statistical: each test states its own n and bound.
