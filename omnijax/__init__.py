@@ -24,6 +24,7 @@ from ._camera import (  # noqa: E402
     RadialProfile,
     parse_ocamcalib,
 )
+from ._change import Background, adapt_background, change_image, change_measure, learn_background, sensor_noise  # noqa: E402
 from ._chroma import chromaticity, chromaticity_covariance  # noqa: E402
 from ._config import (  # noqa: E402
     INPUT_NAMES,
@@ -38,6 +39,16 @@ from ._config import (  # noqa: E402
     Sigmas,
     parse_rig,
 )
+from ._detector import (  # noqa: E402
+    DetectionTrace,
+    Detections,
+    Detector,
+    LineBackground,
+    build_detector,
+    detect,
+    line_background,
+)
+from ._foot import FootSigmaTable, foot_estimate, foot_scores, foot_sigma_mc  # noqa: E402
 from ._geometry import (  # noqa: E402
     D_P_MIN,
     PHI_FLOOR_MAX,
@@ -46,10 +57,13 @@ from ._geometry import (  # noqa: E402
     foveal_offsets,
     head_image_radius,
     image_to_floor,
+    person_image_extent,
     world_to_image,
     point_image_radius,
     pointing,
 )
+from ._indexing import Sectors, Thresholds, hysteresis_sectors, window_profile  # noqa: E402
+from ._polar import PolarIndex, build_polar_index, polar_range  # noqa: E402
 from ._uncertainty import (  # noqa: E402
     METHODS,
     OUTPUT_NAMES,

@@ -154,8 +154,16 @@ class OmniCamera(eqx.Module):
 
     def to_pixel(self, r, theta) -> tuple[Array, Array]:
         """Pixel (x, y) of the polar image point (r px, theta rad), affinity included."""
+        return self.sensor_to_pixel(r * jnp.sin(theta), r * jnp.cos(theta))
+
+    def sensor_to_pixel(self, xs, ys) -> tuple[Array, Array]:
+        """Pixel (x, y) of the sensor point ``(xs, ys) = (r sin theta, r cos theta)``.
+
+        These are OCamCalib's row-wise and column-wise coordinates before its
+        affinity (c, d, e) and centre; rotating them is how a pattern of points
+        is moved around the image without a sine per point.
+        """
         c, d, e = self.affine[0], self.affine[1], self.affine[2]
-        xs, ys = r * jnp.sin(theta), r * jnp.cos(theta)  # OCamCalib's row-wise and column-wise
         return self.center[0] + e * xs + ys, self.center[1] + c * xs + d * ys
 
     def to_polar(self, x, y) -> tuple[Array, Array]:

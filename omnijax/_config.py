@@ -107,13 +107,27 @@ class Sigmas(eqx.Module):
 
 
 class Detection(eqx.Module):
-    """Detection settings: sensor noise, rates, and the default per-detection sigmas."""
+    """Detection settings: sensor noise, rates, contrast, polar sampling and the default sigmas.
+
+    ``c_min`` is the smallest per-pixel non-centrality (the Mahalanobis contrast of
+    a person's chromaticity against the background) for which ``x_m`` must hold.
+    ``r_min``/``r_max`` bound the polar sampling (px); ``None`` derives them from the
+    room. Sizes and counts are static: changing them recompiles.
+    """
 
     sensor_sigma: Float[Array, ""]
     x_f: Float[Array, ""]
     x_m: Float[Array, ""]
     sigma_r_f: Float[Array, ""]
     sigma_theta_f: Float[Array, ""]
+    c_min: Float[Array, ""]
+    adapt_rate: Float[Array, ""]
+    min_floor_radius: Float[Array, ""]
+    n_theta: int = eqx.field(static=True)
+    max_people: int = eqx.field(static=True)
+    background_frames: int = eqx.field(static=True)
+    foot_mc_profiles: int = eqx.field(static=True)
+    r_max: float | None = eqx.field(static=True, default=None)
 
 
 class Room(eqx.Module):
@@ -279,10 +293,19 @@ class PersonSection(_Section):
 
 class DetectionSection(_Section):
     sensor_sigma: Pos = Field(description="sensor noise per channel, grey levels")
-    x_f: Prob = Field(description="false-alarm rate per sector")
-    x_m: Prob = Field(description="miss rate per person")
+    x_f: Prob = Field(description="false-alarm probability of a background radial line (eq 10)")
+    x_m: Prob = Field(description="miss rate per person of contrast >= c_min")
     sigma_r_f: Pos = Field(description="default sigma of the foot radius, px")
     sigma_theta_f_deg: Pos = Field(description="default sigma of the foot azimuth, deg")
+    c_min: Pos = Field(4.0, description="smallest person contrast (non-centrality per pixel) x_m holds for")
+    n_theta: Annotated[int, Field(ge=36, le=4096)] = Field(360, description="radial lines")
+    min_floor_radius: NonNeg = Field(0.3, description="floor radius under the camera left out, m")
+    r_max: Pos | None = Field(None, description="outer radius of the polar sampling, px (default: room)")
+    max_people: Annotated[int, Field(ge=1, le=64)] = 8
+    background_frames: Annotated[int, Field(ge=3, le=1000)] = 30
+    adapt_rate: Annotated[float, Field(ge=0, lt=1)] = Field(0.02, description="background adaptation")
+    foot_mc_profiles: Annotated[int, Field(ge=16, le=4096)] = Field(
+        256, description="Monte Carlo profiles per table cell of sigma_r_f")
 
 
 class ZoomSection(_Section):
@@ -402,6 +425,9 @@ def parse_rig(
     detection = Detection(
         sensor_sigma=_a(de.sensor_sigma), x_f=_a(de.x_f), x_m=_a(de.x_m),
         sigma_r_f=_a(de.sigma_r_f), sigma_theta_f=_a(math.radians(de.sigma_theta_f_deg)),
+        c_min=_a(de.c_min), adapt_rate=_a(de.adapt_rate), min_floor_radius=_a(de.min_floor_radius),
+        n_theta=de.n_theta, max_people=de.max_people, background_frames=de.background_frames,
+        foot_mc_profiles=de.foot_mc_profiles, r_max=de.r_max,
     )
     room = Room(outline=_a(f.room.outline), exclude=tuple(_a(p) for p in f.room.exclude))
     return Rig(

@@ -144,3 +144,23 @@ def image_to_floor(omni, x, y) -> tuple[Array, Array, Array]:
     r, theta = omni.to_polar(x, y)
     R_p, valid = floor_radius(r, omni.r_m, omni.H_o, omni.profile)
     return R_p * jnp.cos(theta), R_p * jnp.sin(theta), valid & (r <= omni.rim)
+
+
+def person_image_extent(R, omni, H_p, R_h, body_radius) -> tuple[Array, Array]:
+    """Radial extent ``(r_in, r_out)`` (px) in the omni image of an upright person whose axis stands
+    at floor distance ``R`` (m): the paper's cylinder (footnote 3) with a head.
+
+    The body is a cylinder of radius ``body_radius`` from the floor to the shoulders at
+    ``H_p - 2 R_h``, topped by a head sphere of radius ``R_h`` whose top is at ``H_p``.
+    The inner end is the body's foot nearest the omni axis (r_f of eq 1 for the floor
+    point ``R - body_radius``); the outer end is the farthest imaged point of the
+    shoulders or head (eq 2's r_h, generalised to the head's outline).
+    """
+    R, H_p, R_h = jnp.broadcast_arrays(jnp.asarray(R, float), jnp.asarray(H_p, float), jnp.asarray(R_h, float))
+    r_in = point_image_radius(jnp.maximum(R - body_radius, 0.0), 0.0, omni.r_m, omni.H_o, omni.profile)
+    a = jnp.linspace(0.0, jnp.pi, 13)
+    R, H_p, R_h = R[..., None], H_p[..., None], R_h[..., None]
+    rho = jnp.concatenate([jnp.broadcast_to(body_radius, R.shape), R_h * jnp.sin(a)], -1)
+    z = jnp.concatenate([H_p - 2 * R_h, H_p - R_h + R_h * jnp.cos(a)], -1)
+    r_out = point_image_radius(R + rho, z, omni.r_m, omni.H_o, omni.profile).max(-1)
+    return r_in, r_out

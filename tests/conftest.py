@@ -37,3 +37,11 @@ def shared_data(*parts: str) -> Path:
     if not path.exists():
         pytest.skip(f"real data not available: {path} (only in the project's shared checkout)")
     return path
+
+
+@pytest.fixture(scope="session")
+def paper_detector(paper_rig):
+    """The detector of configs/paper.toml (built once per test session: thresholds are simulated)."""
+    from omnijax import build_detector
+
+    return build_detector(paper_rig)
