@@ -24,7 +24,16 @@ from ._camera import (  # noqa: E402
     RadialProfile,
     parse_ocamcalib,
 )
-from ._change import Background, adapt_background, change_image, change_measure, learn_background, sensor_noise  # noqa: E402
+from ._change import (  # noqa: E402
+    MEASURES,
+    Background,
+    adapt_background,
+    change_image,
+    change_measure,
+    grey_change_measure,
+    learn_background,
+    sensor_noise,
+)
 from ._chroma import chromaticity, chromaticity_covariance  # noqa: E402
 from ._config import (  # noqa: E402
     INPUT_NAMES,

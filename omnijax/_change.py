@@ -86,9 +86,26 @@ def change_measure(current: Float[ArrayLike, "*b 3"], background: Float[ArrayLik
     return (c * dx * dx - 2 * b * dx * dy + a * dy * dy) / (a * c - b * b)
 
 
-def change_image(frame: UInt8[ArrayLike, "H W 3"], bg: Background) -> Float[Array, "H W"]:
+def grey_change_measure(current: Float[ArrayLike, "*b 3"], background: Float[ArrayLike, "*b 3"],
+                        var_factor: Float[ArrayLike, "*#b"], sigma: Float[ArrayLike, "*#b"]) -> Float[Array, "*b"]:
+    """The grey-level counterpart of :func:`change_measure`, chi-square with 1 dof on the background.
+
+    ``(I - I_b)^2 / ((1 + var_factor) sigma^2 / 3)`` with ``I`` the mean of R, G, B:
+    what the detector sees without illumination invariance (for comparison only).
+    """
+    current = jnp.asarray(current, jnp.float32)
+    background = jnp.asarray(background, jnp.float32)
+    d = current.mean(-1) - background.mean(-1)
+    return d * d / ((1.0 + jnp.asarray(var_factor)) * jnp.asarray(sigma) ** 2 / 3.0)
+
+
+#: Change measures by name, with their degrees of freedom per background sample.
+MEASURES = {"chromaticity": (change_measure, 2), "grey": (grey_change_measure, 1)}
+
+
+def change_image(frame: UInt8[ArrayLike, "H W 3"], bg: Background, measure: str = "chromaticity") -> Float[Array, "H W"]:
     """d^2 at every pixel of ``frame`` (for overlays and per-pixel masks)."""
-    return change_measure(jnp.asarray(frame, jnp.float32), bg.mean, bg.var_factor, bg.sigma)
+    return MEASURES[measure][0](jnp.asarray(frame, jnp.float32), bg.mean, bg.var_factor, bg.sigma)
 
 
 def adapt_background(bg: Background, frame: UInt8[ArrayLike, "H W 3"], still: Bool[ArrayLike, "H W"],

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, PRNGKeyArray, UInt8
 
 from ._camera import OmniCamera
-from ._change import Background, change_measure
+from ._change import MEASURES, Background
 from ._config import Rig
 from ._foot import FootSigmaTable, build_foot_sigma_table, foot_estimate, foot_sigma_lookup
 from ._indexing import Z99, Thresholds, build_thresholds, hysteresis_sectors, window_profile
@@ -37,17 +37,29 @@ class Detector(eqx.Module):
     thresholds: Thresholds
     foot_sigma: FootSigmaTable
     max_people: int = eqx.field(static=True)
+    measure: str = eqx.field(static=True, default="chromaticity")
+
+    @property
+    def dof_per_sample(self) -> int:
+        return MEASURES[self.measure][1]
 
 
-def build_detector(rig: Rig, key: PRNGKeyArray | None = None) -> Detector:
-    """Polar index, thresholds (simulated eq 9) and the sigma_r_f table for ``rig`` (seconds, once)."""
+def build_detector(rig: Rig, key: PRNGKeyArray | None = None, measure: str = "chromaticity") -> Detector:
+    """Polar index, thresholds (simulated eq 9) and the sigma_r_f table for ``rig`` (seconds, once).
+
+    ``measure`` is ``chromaticity`` (the paper's, eq 5-7) or ``grey`` (grey levels,
+    for comparison: what illumination invariance buys).
+    """
+    if measure not in MEASURES:
+        raise ValueError(f"measure must be one of {sorted(MEASURES)}, got {measure!r}")
     key = jax.random.key(0) if key is None else key
     k_th, k_foot = jax.random.split(key)
     polar = build_polar_index(rig)
+    dps = MEASURES[measure][1]
     return Detector(
-        omni=rig.omni, polar=polar, thresholds=build_thresholds(rig, polar, k_th),
-        foot_sigma=build_foot_sigma_table(polar, k_foot, rig.detection.foot_mc_profiles),
-        max_people=rig.detection.max_people,
+        omni=rig.omni, polar=polar, thresholds=build_thresholds(rig, polar, k_th, dps),
+        foot_sigma=build_foot_sigma_table(polar, k_foot, rig.detection.foot_mc_profiles, dps),
+        max_people=rig.detection.max_people, measure=measure,
     )
 
 
@@ -101,7 +113,7 @@ def line_change(detector: Detector, frame: UInt8[Array, "H W 3"], lines: LineBac
     """Steps 1-3: d^2 at every polar sample and the radial sums ``M(theta)``."""
     idx = detector.polar.line_index
     cur = frame.reshape(-1, 3)[idx].astype(jnp.float32)
-    d2 = change_measure(cur, lines.mean, lines.var_factor, lines.sigma)
+    d2 = MEASURES[detector.measure][0](cur, lines.mean, lines.var_factor, lines.sigma)
     return jnp.where(detector.polar.line_ok, d2, 0.0).sum(-1)
 
 
@@ -124,8 +136,9 @@ def detect(detector: Detector, frame: UInt8[Array, "H W 3"], bg: Background,
     sectors = hysteresis_sectors(M, th.lower, th.upper, detector.max_people)
     theta_l, theta_r, theta_f, width = _sector_angles(detector, sectors)
     profiles, pixels = jax.vmap(
-        lambda t: window_profile(frame, bg.mean, bg.var_factor, bg.sigma, detector.omni, polar, t))(theta_f)
-    i, contrast = jax.vmap(lambda p, n: foot_estimate(p, n, polar))(profiles, pixels)
+        lambda t: window_profile(frame, bg.mean, bg.var_factor, bg.sigma, detector.omni, polar, t,
+                                 detector.measure))(theta_f)
+    i, contrast = jax.vmap(lambda p, n: foot_estimate(p, n, polar, detector.dof_per_sample))(profiles, pixels)
     out = polar.hyp_out[i]
     r = jnp.arange(polar.n_r)
     significant = profiles > th.window

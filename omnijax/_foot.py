@@ -33,28 +33,30 @@ def foot_scores(profile: Float[Array, " R"], polar: PolarIndex) -> Float[Array, 
     return jnp.where(polar.hyp_ok, score, -jnp.inf)
 
 
-def foot_estimate(profile: Float[Array, " R"], pixels: Float[Array, " R"], polar: PolarIndex) -> tuple[Array, Array]:
+def foot_estimate(profile: Float[Array, " R"], pixels: Float[Array, " R"], polar: PolarIndex,
+                  dof_per_sample: int = 2) -> tuple[Array, Array]:
     """Best hypothesis index and the person's contrast (non-centrality per pixel) it implies.
 
     The contrast is the method-of-moments estimate over the person's radii:
-    ``E[d2_bar] = 2 w + w c`` for w window pixels.
+    ``E[d2_bar] = 2 w + w c`` for w window pixels (2 dof per chromaticity pixel).
     """
     i = jnp.argmax(foot_scores(profile, polar))
     r = jnp.arange(profile.shape[0])
     on = (r >= i) & (r < polar.hyp_out[i])
     n = jnp.maximum(jnp.sum(jnp.where(on, pixels, 0.0)), 1.0)
-    contrast = (jnp.sum(jnp.where(on, profile, 0.0)) - 2.0 * n) / n
+    contrast = (jnp.sum(jnp.where(on, profile, 0.0)) - dof_per_sample * n) / n
     return i, jnp.maximum(contrast, 0.0)
 
 
-def foot_sigma_mc(polar: PolarIndex, i, contrast, key: PRNGKeyArray, n_profiles: int) -> Array:
+def foot_sigma_mc(polar: PolarIndex, i, contrast, key: PRNGKeyArray, n_profiles: int,
+                  dof_per_sample: int = 2) -> Array:
     """Standard deviation (px, of the axis foot's image radius) of the estimate for a person at ``i``."""
     w = polar.window_px
     r = jnp.arange(w.shape[0])
     on = (r >= i) & (r < polar.hyp_out[i])
     kb, ko = jax.random.split(key)
-    bg = chi2_variate(kb, 2 * w, (n_profiles, w.shape[0]))
-    obj = noncentral_chi2_variate(ko, 2 * w, w * contrast, (n_profiles, w.shape[0]))
+    bg = chi2_variate(kb, dof_per_sample * w, (n_profiles, w.shape[0]))
+    obj = noncentral_chi2_variate(ko, dof_per_sample * w, w * contrast, (n_profiles, w.shape[0]))
     profiles = jnp.where(on, obj, bg)
     est = jax.vmap(lambda p: jnp.argmax(foot_scores(p, polar)))(profiles)
     return jnp.std(polar.hyp_r_f[est])
@@ -68,7 +70,7 @@ class FootSigmaTable(eqx.Module):
     sigma: Float[Array, "G C"]
 
 
-def build_foot_sigma_table(polar: PolarIndex, key: PRNGKeyArray, n_profiles: int,
+def build_foot_sigma_table(polar: PolarIndex, key: PRNGKeyArray, n_profiles: int, dof_per_sample: int = 2,
                            n_index: int = 16, contrasts=(0.25, 0.5, 1, 2, 4, 8, 16, 64)) -> FootSigmaTable:
     """Tabulate :func:`foot_sigma_mc` over the valid hypotheses and a range of contrasts."""
     valid = jnp.nonzero(polar.hyp_ok)[0]
@@ -78,7 +80,7 @@ def build_foot_sigma_table(polar: PolarIndex, key: PRNGKeyArray, n_profiles: int
     keys = jax.random.split(key, ii.size)
     # one cell at a time (lax.map): vmapping the Gamma sampler's rejection loops over every
     # cell at once makes all of them wait for the slowest lane
-    cell = lambda args: foot_sigma_mc(polar, args[0], args[1], args[2], n_profiles)  # noqa: E731
+    cell = lambda args: foot_sigma_mc(polar, args[0], args[1], args[2], n_profiles, dof_per_sample)  # noqa: E731
     table = jax.jit(lambda a, b, k: jax.lax.map(cell, (a, b, k)))(ii.ravel(), cc.ravel(), keys)
     return FootSigmaTable(index=grid.astype(jnp.float64), log_contrast=jnp.log(c), sigma=table.reshape(ii.shape))
 

@@ -1,7 +1,8 @@
 """Indexing (eq 8-10, corrected eq 9): thresholds, psi1 hysteresis over theta, psi2 window profiles.
 
-- Background radial sums ``M(theta)`` are chi-square with ``dof(theta)`` (eq 8; the
-  polar index keeps a line's samples distinct so that this holds).
+- Background radial sums ``M(theta)`` are chi-square with ``dof(theta)`` = the line's
+  samples times the measure's dof per sample (2 for chromaticity; eq 8; the polar
+  index keeps a line's samples distinct so that this holds).
 - The lower threshold ``T_l`` is its ``1 - x_f`` quantile (eq 10).
 - The upper threshold ``T_u`` (a sector's seed) is the ``x_m`` quantile of a person's
   line sum: eq 9 corrected, ``chi2(dof - 2k) + noncentral chi2(2k, k c_min)``, with ``k``
@@ -23,7 +24,7 @@ from scipy.optimize import brentq
 from scipy.stats import chi2, ncx2
 
 from ._camera import OmniCamera
-from ._change import change_measure
+from ._change import MEASURES
 from ._config import Rig
 from ._geometry import person_image_extent
 from ._polar import PolarIndex, body_radius
@@ -76,9 +77,9 @@ def person_line_lengths(rig: Rig, polar: PolarIndex, key: PRNGKeyArray, n: int) 
 def upper_threshold(dof: float, k: np.ndarray, c_min: float, x_m: float) -> float:
     """The ``x_m`` quantile of a person's line sum over the prior of its length ``k`` (eq 9, corrected).
 
-    Given ``k``, ``chi2(dof - 2k) + noncentral chi2(2k, k c)`` is exactly
-    ``noncentral chi2(dof, k c)``; the mixture over the simulated ``k`` is solved for
-    its quantile with SciPy.
+    Given ``k`` samples on the person, ``chi2(dof - 2k) + noncentral chi2(2k, k c)``
+    (2 dof per chromaticity sample) is exactly ``noncentral chi2(dof, k c)``; the
+    mixture over the simulated ``k`` is solved for its quantile with SciPy.
     """
     ks, counts = np.unique(np.round(k), return_counts=True)
     w = counts / counts.sum()
@@ -87,19 +88,20 @@ def upper_threshold(dof: float, k: np.ndarray, c_min: float, x_m: float) -> floa
     return brentq(lambda t: cdf(t) - x_m, lo, hi, xtol=1e-6 * hi)
 
 
-def build_thresholds(rig: Rig, polar: PolarIndex, key: PRNGKeyArray, n_sim: int = 20_000) -> Thresholds:
+def build_thresholds(rig: Rig, polar: PolarIndex, key: PRNGKeyArray, dof_per_sample: int = 2,
+                     n_sim: int = 20_000) -> Thresholds:
     """Thresholds for the rig's ``x_f``, ``x_m`` and ``c_min`` (built once, outside jit)."""
     det = rig.detection
     x_f, x_m, c_min = float(det.x_f), float(det.x_m), float(det.c_min)
-    dof = np.asarray(polar.dof)
+    dof = dof_per_sample * np.asarray(polar.samples)
     lower = chi2.ppf(1 - x_f, dof)
     k_line = np.asarray(jax.jit(person_line_lengths, static_argnums=3)(rig, polar, key, n_sim))
     distinct, inverse = np.unique(dof, return_inverse=True)
-    frac = distinct / (2.0 * polar.n_r)  # share of a line's samples that are distinct
+    frac = distinct / (dof_per_sample * polar.n_r)  # share of a line's samples that are distinct
     upper = np.array([upper_threshold(d, k_line * f, c_min, x_m) for d, f in zip(distinct, frac)])[inverse]
     feasible = bool(np.all(upper >= lower))
     upper = np.maximum(upper, lower)
-    window = chi2.ppf(1 - x_f, 2 * np.asarray(polar.window_px))
+    window = chi2.ppf(1 - x_f, dof_per_sample * np.asarray(polar.window_px))
     seed_fa = float(np.sum(chi2.sf(upper, dof)))
     return Thresholds(lower=jnp.asarray(lower), upper=jnp.asarray(upper), window=jnp.asarray(window),
                       feasible=jnp.asarray(feasible), seed_false_alarm=jnp.asarray(seed_fa))
@@ -141,7 +143,8 @@ def hysteresis_sectors(M: Float[Array, " T"], lower: Float[Array, " T"], upper: 
 
 
 def window_profile(frame: UInt8[Array, "H W 3"], bg_mean: Float[Array, "H W 3"], bg_var: Float[Array, "H W"],
-                   sigma: Float[Array, "H W"], omni: OmniCamera, polar: PolarIndex, theta) -> tuple[Array, Array]:
+                   sigma: Float[Array, "H W"], omni: OmniCamera, polar: PolarIndex, theta,
+                   measure: str = "chromaticity") -> tuple[Array, Array]:
     """psi2 along the line at ``theta``: ``(d2_bar(r), pixels(r))`` summed across the window.
 
     The window's sensor offsets are rotated onto the line (one sine and cosine per
@@ -155,5 +158,5 @@ def window_profile(frame: UInt8[Array, "H W 3"], bg_mean: Float[Array, "H W 3"],
     ok = polar.window_ok & (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
     flat = jnp.where(ok, yi * W + xi, 0)
     cur = frame.reshape(-1, 3)[flat].astype(jnp.float32)
-    d2 = change_measure(cur, bg_mean.reshape(-1, 3)[flat], bg_var.reshape(-1)[flat], sigma.reshape(-1)[flat])
+    d2 = MEASURES[measure][0](cur, bg_mean.reshape(-1, 3)[flat], bg_var.reshape(-1)[flat], sigma.reshape(-1)[flat])
     return jnp.where(ok, d2, 0.0).sum(-1), ok.sum(-1).astype(jnp.float32)

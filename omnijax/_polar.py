@@ -5,7 +5,8 @@ Built once per rig (NumPy-free, but not traced: sizes come out of the geometry):
 - radial lines: ``n_theta`` lines, one sample per pixel of radius from ``r_min`` to
   ``r_max``, nearest-neighbour, with a flag for samples that repeat the previous
   pixel of the line (they are left out, so that the samples of a line stay
-  independent and ``M(theta)`` is chi-square with ``dof(theta)`` degrees of freedom);
+  independent and ``M(theta)`` is chi-square with ``samples(theta)`` times the
+  measure's degrees of freedom per sample);
 - psi2 windows: at each radius, the pixels across the line over the width of a
   person there, as sensor offsets to rotate onto any sector's centre line;
 - foot hypotheses: for each inner end ``i`` of a person along a line, the index just
@@ -33,7 +34,7 @@ class PolarIndex(eqx.Module):
     radii: Float[Array, " R"]
     line_index: Int[Array, "T R"]
     line_ok: Bool[Array, "T R"]
-    dof: Float[Array, " T"]
+    samples: Float[Array, " T"]
     window_ab: Float[Array, "R W 2"]
     window_ok: Bool[Array, "R W"]
     window_px: Float[Array, " R"]
@@ -120,7 +121,7 @@ def build_polar_index(rig: Rig) -> PolarIndex:
     return PolarIndex(
         theta=jnp.asarray(theta), radii=jnp.asarray(radii),
         line_index=jnp.asarray(flat, dtype=jnp.int32), line_ok=jnp.asarray(line_ok),
-        dof=jnp.asarray(2.0 * line_ok.sum(1)),
+        samples=jnp.asarray(line_ok.sum(1), dtype=float),
         window_ab=jnp.asarray(window_ab, dtype=jnp.float32), window_ok=jnp.asarray(window_ok),
         window_px=jnp.asarray(width),
         hyp_out=jnp.asarray(np.minimum(hyp_out, n_r), dtype=jnp.int32), hyp_ok=jnp.asarray(hyp_ok),

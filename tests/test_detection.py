@@ -159,7 +159,7 @@ def test_chi2_variates_against_scipy():
 
 def test_thresholds(paper_detector, paper_rig):
     th, polar = paper_detector.thresholds, paper_detector.polar
-    dof = np.asarray(polar.dof)
+    dof = 2 * np.asarray(polar.samples)
     np.testing.assert_allclose(stats.chi2.sf(np.asarray(th.lower), dof), float(paper_rig.detection.x_f), rtol=1e-6)
     assert bool(th.feasible)
     assert np.all(np.asarray(th.upper) >= np.asarray(th.lower))
@@ -172,7 +172,7 @@ def test_polar_lines_sample_distinct_pixels(paper_detector):
     for t in range(0, polar.n_theta, 7):
         used = idx[t][ok[t]]
         assert len(np.unique(used)) == len(used)
-    assert float(polar.dof.min()) > 0.6 * 2 * polar.n_r
+    assert float(polar.samples.min()) > 0.6 * polar.n_r
 
 
 def _paint_person(rng, base, det, i, theta, tint=(1.15, 0.9, 0.95)):
