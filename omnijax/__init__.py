@@ -57,6 +57,7 @@ from ._detector import (  # noqa: E402
     build_detector,
     detect,
     line_background,
+    sector_mask,
 )
 from ._foot import FootSigmaTable, foot_estimate, foot_scores, foot_sigma_mc  # noqa: E402
 from ._geometry import (  # noqa: E402
