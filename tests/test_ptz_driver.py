@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -248,3 +249,65 @@ def test_ptz_command_errors(args, code, expect):
     proc = subprocess.run([OMNIJAX, "ptz", *args], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert proc.returncode == code and expect in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_socket_url_and_a_dropped_connection():
+    """``socket://host:port`` (a serial-to-network adapter): the driver reconnects when the server drops it."""
+    import socket
+
+    from runtime.ptz import ViscaCamera
+    from runtime.ptz.visca import ViscaParser
+
+    profile = quick_profile("visca")
+    server = socket.create_server(("127.0.0.1", 0))
+    host, port = server.getsockname()
+    accepted = []
+
+    def serve():
+        while True:
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            accepted.append(conn)
+            camera, parser = ViscaCamera(profile), ViscaParser()
+            with conn:
+                while data := conn.recv(256):
+                    camera.advance(time.monotonic())
+                    replies = [r for f in parser.feed(data) for r in camera.receive(f, time.monotonic())]
+                    camera.pan.position, camera.tilt.position = camera.pan.target, camera.tilt.target
+                    camera.zoom.position = camera.zoom.target
+                    conn.sendall(b"".join(replies + camera.tick(time.monotonic())))
+
+    threading.Thread(target=serve, daemon=True).start()
+    try:
+        with PtzDriver(f"socket://{host}:{port}", profile) as ptz:
+            ptz.set_target(0.2, -0.1, 5.0)
+            assert ptz.wait_reached(timeout=20)
+            accepted[0].shutdown(socket.SHUT_RDWR)
+            assert wait_for(lambda: ptz.counters["reconnects"] == 1)
+            t = ptz.set_target(-0.2, 0.1, 2.0)
+            assert ptz.wait_reached(timeout=20)
+            assert ptz.query_position().units == (t.pan, t.tilt, t.zoom)
+    finally:
+        server.close()
+
+
+def test_a_camera_that_falls_silent_is_re_initialised_and_counted_once():
+    """Port still there, camera mute (power cycle): max_silent unanswered commands -> reopen, retry until it answers."""
+    profile = quick_profile("visca", ack_timeout_s=0.1, max_silent=2)
+    with PtyEmulator(profile) as emu, PtzDriver(emu.path, profile) as ptz:
+        ptz.set_target(0.1, 0.0, 1.0)
+        assert ptz.wait_reached(timeout=20)
+        emu.faults = Faults(drop=1.0)
+        for i in range(3):
+            ptz.set_target(0.2 + 0.1 * i, 0.0, 1.0)
+            assert wait_for(lambda: ptz.stats()["timeouts"] >= 2 * (i + 1))
+        assert wait_for(lambda: not ptz.connected)
+        assert wait_for(lambda: ptz.stats()["timeouts"] >= 12)  # AddressSet retried with back-off
+        errors = ptz.counters["errors"]
+        assert errors <= 4  # 2 unanswered commands and one outage: retries do not pile up errors
+        emu.faults = Faults()
+        assert wait_for(lambda: ptz.connected)
+        assert ptz.wait_reached(timeout=20)
+        assert ptz.counters["reconnects"] == 1 and ptz.counters["errors"] == errors

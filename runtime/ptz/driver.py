@@ -112,6 +112,7 @@ class PtzDriver:
         self._next_send = 0.0
         self._clamped: tuple[str, ...] = ()
         self._ever_connected = False
+        self._outage_since: float | None = None
         self.last_error: str | None = None
         self._counts = dict.fromkeys(
             ("commands", "errors", "reconnects", "acks", "completions", "timeouts", "buffer_full",
@@ -275,10 +276,14 @@ class PtzDriver:
             self._fail_queries(f"{self.port}: driver stopped")
 
     def _fail(self, reason: str) -> None:
+        """Close a failed link; the first failure of an outage is an error and a warning, the rest debug."""
         self.last_error = reason
-        with self._cond:
-            self._counts["errors"] += 1
-        log.warning("PTZ link lost on %s: %s; reopening", self.port, reason)
+        first = self._outage_since is None
+        if first:
+            self._outage_since = time.monotonic()
+            with self._cond:
+                self._counts["errors"] += 1
+        (log.warning if first else log.debug)("PTZ link lost on %s: %s; reopening", self.port, reason)
         self._close()
         self._fail_queries(f"{self.port}: {reason}")
 
@@ -299,7 +304,8 @@ class PtzDriver:
         try:
             self._initialise()
         except _LinkLost as exc:
-            self._fail(f"initialisation failed: {exc}")
+            if not self._stop.is_set():
+                self._fail(f"initialisation failed: {exc}")
             return False
         with self._cond:
             if self._ever_connected:
@@ -310,7 +316,9 @@ class PtzDriver:
             self._silent = 0
             self._connected.set()
             self._cond.notify_all()
-        log.info("PTZ connected on %s (%s, address %d)", self.port, self.profile.protocol, self.profile.address)
+        outage, self._outage_since = self._outage_since, None
+        log.info("PTZ connected on %s (%s, address %d)%s", self.port, self.profile.protocol, self.profile.address,
+                 "" if outage is None else f" after {time.monotonic() - outage:.2f} s without")
         return True
 
     def _initialise(self) -> None:
@@ -432,6 +440,8 @@ class PtzDriver:
                 raise _LinkLost(self._lost_reason or "driver stopped")
             if not answered:
                 self._counts["timeouts"] += 1
+                if exchange.group == "init":  # a camera that does not answer: its outage counts once, in _fail
+                    return None
                 self._counts["errors"] += 1
                 self._silent += 1
                 silent = self._silent

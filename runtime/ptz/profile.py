@@ -110,7 +110,7 @@ class LinkSection(_Section):
     completion_timeout_s: Pos = 10.0
     min_interval_s: Annotated[float, Field(ge=0)] = 0.05
     retry_delay_s: Pos = 0.05
-    reconnect_backoff_s: Annotated[list[Pos], Len(2, 2)] = [0.05, 2.0]
+    reconnect_backoff_s: Annotated[list[Pos], Len(2, 2)] = [0.05, 0.5]
     max_silent: Annotated[int, Field(ge=1)] = 3
 
     @model_validator(mode="after")
