@@ -242,7 +242,8 @@ class PtzDriver:
         """All counters, and write-to-answer latencies (ms): ``ack`` for commands, ``query`` for inquiries."""
         with self._cond:
             out: dict = dict(self._counts)
-            lat = {k: np.asarray(v) * 1e3 for k, v in self._latency.items()}
+            lat = {k: list(v) for k, v in self._latency.items()}
+        lat = {k: 1e3 * np.asarray(v) for k, v in lat.items()}
         out["connected"] = self.connected
         out["latency_ms"] = {
             k: ({"p50": float(np.median(v)), "p99": float(np.percentile(v, 99)), "n": int(v.size)}
