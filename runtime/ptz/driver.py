@@ -460,7 +460,11 @@ class PtzDriver:
     def _answer_query(self, fut: Future) -> None:
         answers = []
         for exchange in self._dialect.queries():
-            reply = self._exchange(exchange)
+            try:
+                reply = self._exchange(exchange)
+            except _LinkLost as exc:
+                fut.set_exception(PtzError(f"{self.port}: position inquiry failed ({exc})"))
+                raise
             if reply is None or reply.kind == "error":
                 what = "no answer" if reply is None else f"error 0x{reply.code:02x}"
                 fut.set_exception(PtzError(f"{self.port}: position inquiry failed ({what})"))

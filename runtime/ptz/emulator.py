@@ -8,15 +8,16 @@ pyserial exactly as it would open ``/dev/ttyUSB0``.
 
 VISCA behaviour: two sockets; a motion command is ACKed and completed when the
 motion ends; a new pan-tilt (or zoom) command replaces a running one, whose
-socket completes at once; out-of-range speeds are syntax errors, positions
-beyond the limits "not executable", over-long or short packets "message
-length", unknown messages "syntax"; Cancel answers "cancelled" or "no socket";
-AddressSet and IF_Clear work as on a daisy chain whose ``position``-th camera
-this is. Pelco-D behaviour: absolute pan/tilt/zoom at the profile's top speed
-(pan the short way round when it turns fully), position queries, presets, a
-general response to each accepted command when the profile says so; packets
-with a bad checksum, unsupported commands and out-of-range values are ignored
-and counted as errors.
+socket completes at once (so "buffer full" comes only from injected faults);
+out-of-range speeds are syntax errors, positions beyond the limits "not
+executable", over-long or short packets "message length", unknown messages
+"syntax"; Cancel answers "cancelled" or "no socket"; AddressSet and IF_Clear
+work as on a daisy chain whose ``chain_position``-th camera this is. Pelco-D
+behaviour: absolute pan/tilt/zoom at the profile's top speed (pan the short way
+round when it turns fully), position queries, presets, a general response to
+each accepted command when the profile says so; packets with a bad checksum,
+unsupported commands and out-of-range values are ignored and counted as errors.
+Motion is at constant speed (no acceleration ramps).
 
 Faults can be injected (:class:`Faults`): garbled, dropped or noisy replies,
 and (VISCA) "buffer full" answers.
@@ -247,10 +248,8 @@ class ViscaCamera(_Camera):
             if running == kind:
                 self._free(socket, stop=False)
                 replies.append(visca.completion(self.address, socket))
-        free = [s for s in (1, 2) if s not in self.sockets]
-        if not free:
-            return replies + self._error(0, ErrorCode.BUFFER_FULL)
-        socket = free[0]
+        # the running command of this kind (if any) was just freed, so one of the two sockets is free
+        socket = min(s for s in (1, 2) if s not in self.sockets)
         if not executable:
             return replies + self._error(socket, ErrorCode.NOT_EXECUTABLE)
         self.sockets[socket] = kind
@@ -302,9 +301,9 @@ class PelcoDCamera(_Camera):
         if msg.cmd1:
             return None
         if msg.cmd2 in pelco_d.QUERY_REPLY:
-            value = {pelco_d.QUERY_PAN: lambda: pelco_d.wrap_angle(round(self.pan.position)),
-                     pelco_d.QUERY_TILT: lambda: pelco_d.wrap_angle(round(self.tilt.position)),
-                     pelco_d.QUERY_ZOOM: lambda: round(self.zoom.position)}[msg.cmd2]()
+            value = {pelco_d.QUERY_PAN: pelco_d.wrap_angle(round(self.pan.position)),
+                     pelco_d.QUERY_TILT: pelco_d.wrap_angle(round(self.tilt.position)),
+                     pelco_d.QUERY_ZOOM: round(self.zoom.position)}[msg.cmd2]
             return pelco_d.position_reply(a, pelco_d.QUERY_REPLY[msg.cmd2], value)
         if msg.cmd2 in (pelco_d.SET_PAN, pelco_d.SET_TILT):
             axis = "pan" if msg.cmd2 == pelco_d.SET_PAN else "tilt"

@@ -243,7 +243,7 @@ class DeviceProfile(_Section):
         m = self.mounting
         pan_deg = (pan / self.pan.units_per_deg - m.pan_zero_deg) * m.pan_direction
         pan_deg = -((180.0 - pan_deg) % 360.0) + 180.0
-        tilt_deg = (tilt / self.tilt.units_per_deg - m.tilt_zero_deg) * m.tilt_direction
+        tilt_deg = (tilt / self.tilt.units_per_deg - m.tilt_zero_deg) * m.tilt_direction + 0.0  # no -0.0
         mag = float(np.interp(zoom, self.zoom.position, self.zoom.magnification))
         return PtzPosition(math.radians(pan_deg), math.radians(tilt_deg), mag, (pan, tilt, zoom))
 
