@@ -59,4 +59,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # `python -m runtime.cli` runs this file as __main__: use the package's module, so that
+    # runtime.cli.UsageError raised by the commands is the class main() catches.
+    from runtime.cli import main as _main
+
+    sys.exit(_main())
