@@ -1,7 +1,7 @@
 """omnijax: jitted JAX kernels of the dual-camera surveillance system (Greiffenhagen et al., CVPR 2000).
 
 Pure functions of arrays and config PyTrees: camera models, chromaticity, the
-pointing geometry, its uncertainty and the zoom. ``optimise`` and ``runtime``
+pointing geometry, its uncertainty, the zoom, and calibration (rim fit, rig fit). ``optimise`` and ``runtime``
 import this package, never the reverse.
 
 Importing omnijax enables JAX's float64 (geometry, uncertainty and Monte Carlo
@@ -13,6 +13,21 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from ._aim import Aim, aim, aim_with_covariance  # noqa: E402
+from ._calibration import (  # noqa: E402
+    GLOBAL_NAMES,
+    PARAM_NAMES,
+    PARAM_UNITS,
+    RIM_NAMES,
+    CalibrationProblem,
+    Observations,
+    RigFit,
+    RimPrior,
+    SimulationSettings,
+    draw_true_rig,
+    fit_rig,
+    simulate_calibration,
+    with_mounting_sigma,
+)
 from ._camera import (  # noqa: E402
     PROFILES,
     Equidistant,
@@ -50,6 +65,7 @@ from ._geometry import (  # noqa: E402
     point_image_radius,
     pointing,
 )
+from ._rim import RimEdges, RimFit, fit_circle, fit_rim, rim_edges  # noqa: E402
 from ._uncertainty import (  # noqa: E402
     METHODS,
     OUTPUT_NAMES,
