@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 from jax.scipy.ndimage import map_coordinates
-from jaxtyping import Array, ArrayLike, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float, Real
 
 #: Cauchy weight constant (95 % efficiency at Gaussian errors), in units of the residual scale.
 CAUCHY_C = 2.3849
@@ -36,6 +36,8 @@ COARSE_SMOOTH = 0.01
 #: On each ray the rim is the outermost drop at least this fraction of the ray's strongest drop
 #: (beyond the rim there is no image, so no drop as large; inside, edges of the scene may be sharper).
 OUTERMOST_FRACTION = 0.5
+#: A ray whose rim drop is weaker than this fraction of the median ray's did not see the rim.
+WEAK_FRACTION = 0.2
 
 
 class RimEdges(eqx.Module):
@@ -74,16 +76,19 @@ def _gaussian_derivative(step: float, smooth: float) -> Array:
 
 @eqx.filter_jit
 def rim_edges(
-    gray: Float[ArrayLike, "H W"], center: Float[ArrayLike, "2"], r_start: Float[ArrayLike, ""],
-    step: float, n_r: int, n_rays: int, smooth: float = SMOOTH_PX,
+    gray: Real[ArrayLike, "H W"], center: Float[ArrayLike, "2"], r_start: Float[ArrayLike, ""],
+    step: float, n_r: int, n_rays: int, smooth: float = SMOOTH_PX, whole_rays: bool = False,
 ) -> RimEdges:
     """The rim's brightness drop along ``n_rays`` rays from ``center`` (px): on each ray the
     outermost drop that is at least ``OUTERMOST_FRACTION`` of the ray's strongest.
 
     Each ray is sampled (bilinear) at ``n_r`` radii ``r_start + step * i`` (px); a
     ray counts (``ok``) where the smoothing kernel around its edge lies inside the
-    image. The profile is smoothed by a Gaussian of ``smooth`` px before it is
-    differentiated. ``step``, ``smooth`` and the counts are static.
+    image, its drop is at least ``WEAK_FRACTION`` of the median ray's, and, with
+    ``whole_rays``, every sample of the ray is inside the image (a rim that leaves
+    the frame is then not mistaken for an edge inside it). The profile is smoothed
+    by a Gaussian of ``smooth`` px before it is differentiated. ``step``,
+    ``smooth``, ``whole_rays`` and the counts are static.
     """
     gray = jnp.asarray(gray, jnp.float32)
     center = jnp.asarray(center, jnp.float32)
@@ -118,6 +123,9 @@ def rim_edges(
     r_edge = radii[0] + (k_in + shift) * step
     strength = take(drop, k)
     ok = jnp.isfinite(strength) & (strength > 0) & (k == k_in)
+    if whole_rays:
+        ok = ok & jnp.all(inside, axis=1)
+    ok = ok & (strength >= WEAK_FRACTION * jnp.nanmedian(jnp.where(ok, strength, jnp.nan)))
     points = jnp.stack([center[0] + r_edge * cos_a[:, 0], center[1] + r_edge * sin_a[:, 0]], axis=-1)
     return RimEdges(points=points, strength=jnp.where(ok, strength, 0.0), ok=ok)
 
@@ -171,7 +179,7 @@ def fit_circle(points: Float[ArrayLike, "n 2"], ok: Bool[ArrayLike, " n"], init:
 
 
 def fit_rim(
-    gray: Float[ArrayLike, "H W"], center: tuple[float, float], radius: float, search: float = 0.25,
+    gray: Real[ArrayLike, "H W"], center: tuple[float, float], radius: float, search: float = 0.25,
     n_rays: int = 720, step: float = 0.5,
 ) -> tuple[RimFit, RimEdges]:
     """The rim circle of one grey frame, from a guess of its centre and radius (px).
@@ -180,16 +188,17 @@ def fit_rim(
     guess, at a coarse scale (profiles smoothed over 1 % of the radius, so that
     the rim's large brightness drop beats sharp but weaker edges inside the
     image); pass 2 looks again within 3 % (at least 8 px) of the pass-1 circle,
-    along rays from its centre, at the fine scale, and fits once more. Returns the final fit and its
+    along rays from its centre, at the fine scale, using only rays that stay inside
+    the frame over that window, and fits once more. Returns the final fit and its
     edge points.
     """
     fit = None
     lo, hi = radius * (1 - search), radius * (1 + search)
     c0 = jnp.asarray(center, float)
     init = jnp.array([center[0], center[1], radius], float)
-    for smooth in (max(SMOOTH_PX, COARSE_SMOOTH * radius), SMOOTH_PX):
+    for smooth, whole in ((max(SMOOTH_PX, COARSE_SMOOTH * radius), False), (SMOOTH_PX, True)):
         lo = max(lo, 2 * smooth)
-        edges = rim_edges(gray, c0, jnp.asarray(lo), step, int((hi - lo) / step), n_rays, smooth)
+        edges = rim_edges(gray, c0, jnp.asarray(lo), step, int((hi - lo) / step), n_rays, smooth, whole)
         fit = fit_circle(edges.points, edges.ok, init)
         r1 = float(fit.radius)
         margin = max(0.03 * r1, 8.0)

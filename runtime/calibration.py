@@ -36,10 +36,11 @@ from omnijax import (
     RimFit,
     RimPrior,
     SimulationSettings,
-    aim,
     aim_with_covariance,
     face_pixels,
     fit_rig,
+    pointing,
+    pointing_covariance,
     simulate_calibration,
     with_mounting_sigma,
     world_to_image,
@@ -324,26 +325,32 @@ def with_sigmas(rig: Rig, sigmas: dict[str, float]) -> Rig:
                        tuple(jnp.asarray(sigmas[n], float) for n in names))
 
 
+@eqx.filter_jit
+def _zoom_at(rig: Rig, r_f, theta_f, zero_sigma):
+    """Zoom, head width (px) and feasibility at foot points, the zero offsets' sigmas included."""
+
+    def one(r, t):
+        x = rig.input_mean(r, t)
+        cov = pointing_covariance(x, rig.input_sigma(), rig.omni.profile, "autodiff")
+        p = pointing(x, rig.omni.profile)
+        cov = PointingCovariance(cov=with_mounting_sigma(cov.cov, p.pan, p.tilt, *zero_sigma), valid=cov.valid)
+        a = aim_with_covariance(rig, x, cov)
+        return a.zoom.zoom, face_pixels(rig.foveal.lens, a.zoom.zoom, p.slant, rig.person.R_h), a.zoom.feasible
+
+    return jax.vmap(one)(r_f, theta_f)
+
+
 def face_widths(rig: Rig, zero_sigma: tuple[float, float] = (0.0, 0.0)) -> list[dict]:
-    """Head width in foveal pixels at the zoom the rig's rule chooses, at :data:`ZOOM_POINTS_M`.
+    """Head width in foveal pixels at the zoom the rig's rule chooses, at :data:`ZOOM_POINTS_M` in the room.
 
     ``zero_sigma``: sigmas (rad) of the PTZ's pan/tilt zero offsets, added to the
     pointing covariance (the geometry's nine inputs do not include them).
     """
-    rows = []
-    for X, Y in ZOOM_POINTS_M:
-        if not bool(rig.room.contains(X, Y)):
-            continue
-        r_f, theta_f = (float(v) for v in rig.omni.to_polar(*world_to_image(rig.omni, X, Y, 0.0)))
-        a = aim(rig, r_f, theta_f)
-        if any(zero_sigma):
-            cov = with_mounting_sigma(a.covariance.cov, a.pointing.pan, a.pointing.tilt, *zero_sigma)
-            a = aim_with_covariance(rig, rig.input_mean(r_f, theta_f),
-                                    PointingCovariance(cov=cov, valid=a.covariance.valid))
-        px = face_pixels(rig.foveal.lens, a.zoom.zoom, a.pointing.slant, rig.person.R_h)
-        rows.append({"floor_m": [X, Y], "zoom": float(a.zoom.zoom), "face_px": float(px),
-                     "feasible": bool(a.zoom.feasible)})
-    return rows
+    pts = np.array([p for p in ZOOM_POINTS_M if bool(rig.room.contains(*p))])
+    r_f, theta_f = rig.omni.to_polar(*world_to_image(rig.omni, pts[:, 0], pts[:, 1], np.zeros(len(pts))))
+    zoom, px, feasible = _zoom_at(rig, r_f, theta_f, jnp.asarray(zero_sigma, float))
+    return [{"floor_m": list(map(float, p)), "zoom": float(z), "face_px": float(f), "feasible": bool(ok)}
+            for p, z, f, ok in zip(pts, zoom, px, feasible)]
 
 
 # --------------------------------------------------------------------------------------
@@ -362,12 +369,13 @@ def simulate_many(rig: Rig, settings: SimulationSettings, n_positions: int, n_ru
     the median reported ``sigma``, the ``rmse`` against the truth, the mean
     chi2 / dof, and how many runs were counted.
     """
-    run = jax.jit(jax.vmap(lambda k: _simulate_one(k, rig, settings, n_positions)))
-    keys = jax.random.split(jax.random.key(seed), n_runs)
+    keys = jax.random.split(jax.random.key(seed), -(-n_runs // batch) * batch)  # whole batches: one shape
     values, truths, covs, counted, chi2 = [], [], [], [], []
     for start in range(0, n_runs, batch):
-        fits, truth, drawn = run(keys[start:start + batch])
-        for i in range(truth.shape[0]):
+        n = min(batch, n_runs - start)
+        fits, truth, drawn = jax.tree_util.tree_map(
+            lambda a: a[:n], _simulate_batch(keys[start:start + batch], rig, settings, n_positions))
+        for i in range(n):
             fit_i = jax.tree_util.tree_map(lambda a: a[i], fits)
             counted.append(bool(drawn[i]) and check_fit(fit_i, max_sigma_m, max_sigma_deg) is None)
         values.append(np.asarray(fits.values))
@@ -375,7 +383,7 @@ def simulate_many(rig: Rig, settings: SimulationSettings, n_positions: int, n_ru
         covs.append(np.asarray(fits.cov))
         chi2.append(np.asarray(fits.chi2) / fits.dof)
         if progress:
-            progress(truth.shape[0])
+            progress(n)
     values, truths, covs = np.concatenate(values), np.concatenate(truths), np.concatenate(covs)
     ok = np.array(counted)
     sig = np.sqrt(np.diagonal(covs, axis1=1, axis2=2))
@@ -391,6 +399,11 @@ def simulate_many(rig: Rig, settings: SimulationSettings, n_positions: int, n_ru
         "rmse": {n: float(np.sqrt(np.mean(err[ok, i] ** 2))) for i, n in enumerate(PARAM_NAMES)},
         "chi2_per_dof_mean": float(np.concatenate(chi2)[ok].mean()),
     }
+
+
+@eqx.filter_jit
+def _simulate_batch(keys, rig: Rig, settings: SimulationSettings, n_positions: int):
+    return jax.vmap(lambda k: _simulate_one(k, rig, settings, n_positions))(keys)
 
 
 def _simulate_one(key, rig, settings, n_positions):
