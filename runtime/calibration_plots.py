@@ -81,7 +81,7 @@ def residual_figure(fit: RigFit, obs: Observations, path: Path, rim: RimFit | No
 
 def sigma_figure(by_positions: list[dict], assumed: dict[str, float], path: Path) -> None:
     """Median calibrated sigma of each rig parameter against the number of floor positions K,
-    beside the sigma the rig file assumes (dashed)."""
+    beside the sigma the rig file assumes (dashed, where it assumes one)."""
     Ks = [b["positions"] for b in by_positions]
     fig, (ax_m, ax_a) = plt.subplots(1, 2, figsize=(11, 4.2))
     for name in GLOBAL_NAMES:
@@ -89,7 +89,7 @@ def sigma_figure(by_positions: list[dict], assumed: dict[str, float], path: Path
         ax = ax_a if angle else ax_m
         conv = math.degrees if angle else (lambda v: 100 * v)
         line, = ax.plot(Ks, [conv(b["sigma_median"][name]) for b in by_positions], "o-", label=name)
-        if name in assumed:
+        if assumed.get(name, 0) > 0:
             ax.axhline(conv(assumed[name]), ls="--", color=line.get_color(), lw=0.8,
                        label=f"{name} assumed in the rig file")
     for ax, unit in ((ax_m, "cm"), (ax_a, "deg")):
