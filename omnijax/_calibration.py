@@ -25,8 +25,6 @@ two heights at least (e.g. a mark on the floor and one at 1.5 m) do.
 
 from __future__ import annotations
 
-import math
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
