@@ -176,13 +176,18 @@ def _frame_root(aspect, cov, rho, target, a, b, g_a, g_b, solve, t_safe):
 
 @_frame_root.defjvp
 def _frame_root_jvp(aspect, primals, tangents):
+    """Implicit function theorem: ``dt = -(dg/dcov dcov + dg/drho drho + dg/dtarget dtarget) / (dg/dt)``.
+
+    The partial derivatives come from one reverse pass over the primal values, so
+    they are computed once however many tangents are pushed through (jacfwd).
+    """
     cov, rho, target, *_, solve, t_safe = primals
+    d_cov, d_rho, d_target = tangents[:3]
     t = _frame_root(aspect, *primals)
     at = jnp.where(solve, t, t_safe)
-    g = lambda t, cov, rho, target: _score_excess(t, cov, rho, aspect, target)  # noqa: E731
-    _, slope = jax.jvp(lambda t: g(t, cov, rho, target), (at,), (jnp.ones_like(at),))
-    _, dg = jax.jvp(lambda *p: g(at, *p), (cov, rho, target), tuple(tangents[:3]))
-    return t, jnp.where(solve, -dg / jnp.where(solve, slope, 1.0), 0.0)
+    g_t, g_cov, g_rho, g_target = jax.grad(_score_excess, argnums=(0, 1, 2, 4))(at, cov, rho, aspect, target)
+    dg = jnp.sum(g_cov * d_cov) + g_rho * d_rho + g_target * d_target
+    return t, jnp.where(solve, -dg / jnp.where(solve, g_t, 1.0), 0.0)
 
 
 def _choose_calibrated(lens, cov4, tilt, slant, R_h, p_contain):
