@@ -29,6 +29,7 @@ from ._search import (
     Landscape,
     SearchResult,
     StartResult,
+    compile_minimiser,
     landscape_layouts,
     search,
     search_box,

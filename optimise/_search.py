@@ -126,9 +126,8 @@ def _minimise(rig: Rig, box: Box, base: Layout, X, Y, live, step: float, u0, sha
 def _evaluate(rig: Rig, layouts: Layout, X, Y, live, step: float) -> tuple[FloorValues, dict[str, Array]]:
     """Per-point values and every statistic for a batch of layouts.
 
-    Vmapped over the floor points and looped (``lax.map``) over the layouts: one
-    layout's intermediates (points x quadrature nodes) stay in cache, which a
-    vmap over layouts too would not (it ran 1.8 times slower per point).
+    Vmapped over the floor points and looped (``lax.map``) over the layouts, so
+    that the intermediates (points x quadrature nodes) stay one layout's size.
     """
 
     def one(layout):
@@ -243,21 +242,41 @@ class SearchResult:
     evaluations: dict[str, int] = field(default_factory=dict)
 
 
-def _run_bfgs(rig: Rig, box: Box, base: Layout, floor: FloorGrid, x0: np.ndarray) -> tuple[np.ndarray, int, bool]:
+Minimiser = Callable[..., tuple[Array, Array, Array]]
+
+
+def compile_minimiser(rig: Rig, floor: FloorGrid) -> Minimiser:
+    """The BFGS program of :func:`search` for ``rig`` and ``floor``, traced and compiled ahead of time.
+
+    Compiling it is the longest step of a search; a caller may do it on another
+    thread while the landscape runs and hand the result to :func:`search`.
+    """
+    box, base = search_box(rig), configured_layout(rig)
+    X, Y, live = floor.padded()
+    u0 = jnp.zeros(len(box.names))
+    return _minimise.lower(rig, box, base, X, Y, live, floor.step, u0, jnp.asarray(0.0)).compile()
+
+
+def _run_bfgs(minimiser: Minimiser, rig: Rig, box: Box, base: Layout, floor: FloorGrid,
+              x0: np.ndarray) -> tuple[np.ndarray, int, bool]:
     """BFGS from ``x0`` (sharpened in turn for the worst case): the optimum, total steps, converged."""
     u = box.to_unconstrained(jnp.asarray(x0))
     schedule = SHARPNESS if rig.layout.statistic == "worst" else (0.0,)
     steps, converged = 0, True
     X, Y, live = floor.padded()
     for sharpness in schedule:
-        u, n, ok = _minimise(rig, box, base, X, Y, live, floor.step, u, jnp.asarray(sharpness))
+        u, n, ok = minimiser(rig, box, base, X, Y, live, floor.step, u, jnp.asarray(sharpness))
         steps += int(n)
         converged = converged and bool(ok)
     return box.wrap(box.from_unconstrained(u)), steps, converged
 
 
-def search(rig: Rig, floor: FloorGrid, progress: Progress | None = None) -> SearchResult:
+def search(rig: Rig, floor: FloorGrid, progress: Progress | None = None,
+           minimiser: Callable[[], Minimiser] | None = None) -> SearchResult:
     """Optimise the PTZ placement of ``rig`` over ``floor`` under its ``[layout]`` section.
+
+    ``minimiser``, if given, returns the compiled BFGS program
+    (:func:`compile_minimiser`); it is asked for only once the landscape is done.
 
     Stages (reported to ``progress``): ``landscape``, the grid; ``search``, BFGS
     from every start, and once more from the grid's best cell where it beats them
@@ -284,8 +303,9 @@ def search(rig: Rig, floor: FloorGrid, progress: Progress | None = None) -> Sear
 
     starts = []
     tick("search", False)
+    bfgs = minimiser() if minimiser is not None else _minimise
     for x0 in start_points(box, box.values(base), spec.starts):
-        x, steps, ok = _run_bfgs(rig, box, base, floor, x0)
+        x, steps, ok = _run_bfgs(bfgs, rig, box, base, floor, x0)
         starts.append(StartResult(start=x0, x=x, objective=math.nan, steps=steps, converged=ok))
         tick("search", True)
     _, summ = evaluate([box.layout(jnp.asarray(s.x), base) for s in starts])
@@ -294,8 +314,8 @@ def search(rig: Rig, floor: FloorGrid, progress: Progress | None = None) -> Sear
     best = min(starts, key=lambda s: sense * s.objective)
     polished = False
     if sense * grid_objective < sense * best.objective:
-        x, steps, ok = _run_bfgs(rig, box, base, floor, box.inset(grid_x))
-        polish = StartResult(start=grid_x, x=x, objective=evaluate([box.layout(jnp.asarray(x), base)])[1][0][key],
+        x, steps, ok = _run_bfgs(bfgs, rig, box, base, floor, box.inset(grid_x))
+        polish = StartResult(start=box.inset(grid_x), x=x, objective=evaluate([box.layout(jnp.asarray(x), base)])[1][0][key],
                              steps=steps, converged=ok)
         polished = sense * polish.objective < sense * best.objective
         if polished:

@@ -51,8 +51,15 @@ def floor_figure(grid: FloorGrid, rig: Rig, result: SearchResult, quantities: li
              ("optimised", place(rig, result.best), result.values_best, result.summary_best)]
     rows = [(quantities[0], "image"), (quantities[0], "contour")] if len(quantities) == 1 else \
         [(q, "both") for q in quantities]
-    fig, axes = plt.subplots(len(rows), 2, figsize=(12, 4.75 * len(rows)), constrained_layout=True, squeeze=False)
     ext = grid.extent
+    aspect = (ext[3] - ext[2]) / (ext[1] - ext[0])
+    if aspect < 0.4:  # a corridor: before and after one above the other, full width
+        fig, grid_axes = plt.subplots(2 * len(rows), 1, figsize=(12, 2 * len(rows) * (12 * aspect + 1.6)),
+                                      constrained_layout=True, squeeze=False)
+        axes = grid_axes.reshape(len(rows), 2)
+    else:
+        fig, axes = plt.subplots(len(rows), 2, figsize=(12, 4.75 * len(rows)), constrained_layout=True,
+                                 squeeze=False)
     for row, (quantity, style) in enumerate(rows):
         label, pick = MAP_QUANTITIES[quantity]
         maps = [grid.to_map(np.where(np.asarray(fv.weight) > 0, pick(fv), np.nan)) for _, _, fv, _ in cases]
@@ -64,7 +71,7 @@ def floor_figure(grid: FloorGrid, rig: Rig, result: SearchResult, quantities: li
             if style in ("image", "both"):
                 im = ax.imshow(m, origin="lower", extent=ext, cmap="viridis", vmin=lo, vmax=hi,
                                interpolation="nearest")
-                fig.colorbar(im, ax=ax, shrink=0.85, label=label)
+                fig.colorbar(im, ax=ax, shrink=0.85, label=label, aspect=20 if aspect >= 0.4 else 5)
             if style == "contour":
                 ax.imshow(np.where(np.isfinite(m), 1.0, 0.75), origin="lower", extent=ext, cmap="gray", vmin=0,
                           vmax=1, interpolation="nearest")
@@ -83,7 +90,7 @@ def floor_figure(grid: FloorGrid, rig: Rig, result: SearchResult, quantities: li
             ax.set_xlabel("floor x (m)")
             ax.set_ylabel("floor y (m)")
             ax.set_facecolor("0.75" if style != "contour" else "w")
-            if row == 0:
+            if row == 0 or aspect < 0.4:
                 ax.set_title(f"{name}: {_layout_text(r)}\nface mean {summ['face_px_mean']:.1f} px, worst "
                              f"{summ['face_px_worst']:.1f} px; operational {100 * summ['operational_fraction']:.0f} %"
                              f"\nvar(pan) + var(tilt) mean {summ['variance_mean']:.3g}, worst "
@@ -151,6 +158,9 @@ def landscape_figure(result: SearchResult, rig: Rig, path: Path) -> None:
             if "H_f" in shown and k == "var_tan_tilt_mean":
                 h = float(rig.person.H_p - rig.person.R_h)
                 ax.axhline(h, color="w", ls="--", lw=1) if shown[1] == "H_f" else ax.axvline(h, color="w", ls="--", lw=1)
+            for values, limit in ((xs, ax.set_xlim), (ys, ax.set_ylim)):  # room for markers on the bounds
+                pad = 0.03 * (values[-1] - values[0])
+                limit(values[0] - pad, values[-1] + pad)
             ax.set_xlabel(_LABELS[shown[0]])
             ax.set_ylabel(_LABELS[shown[1]])
         else:
@@ -165,8 +175,8 @@ def landscape_figure(result: SearchResult, rig: Rig, path: Path) -> None:
     axes.flat[0].legend(fontsize=8, loc="best")
     held = [n for n in names if n not in shown]
     note = (" (others held at the optimum's grid cell: " + ", ".join(held) + ")") if held else ""
+    keys = "x: where each start ended; dashed: H_p - R_h" if len(shown) == 2 else "dashed: the layouts marked"
     fig.suptitle(f"landscape: {result.evaluations['landscape_layouts']} layouts x "
-                 f"{result.evaluations['floor_points']} floor points{note}; x: where each start ended; dashed: "
-                 "H_p - R_h", fontsize=10)
+                 f"{result.evaluations['floor_points']} floor points{note}; {keys}", fontsize=10)
     fig.savefig(path, dpi=80)
     plt.close(fig)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 HELP = "optimise the PTZ placement (D_c, H_f; optionally theta_c, H_o) for the room: layout.json and maps"
 DESCRIPTION = """\
@@ -30,8 +31,9 @@ D_c and H_f: the objective, mean var sin pan, mean var tan tilt, the other
 objective).
 
 Flags override the [layout] keys of the same name (see configs/paper.toml).
-Compiled programs are cached in --cache-dir (JAX's persistent compilation cache),
-so later runs skip most of the compilation.
+The search's BFGS program compiles on a second thread while the landscape grid
+runs; compiled programs are cached in --cache-dir (JAX's persistent compilation
+cache), so later runs skip most of the compilation.
 """
 
 #: Flag -> [layout] key.
@@ -196,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
 
     import jax
 
-    from optimise import floor_grid, search
+    from optimise import compile_minimiser, floor_grid, search
 
     spec = rig.layout
     try:
@@ -209,7 +211,8 @@ def run(args: argparse.Namespace) -> int:
     timing: dict[str, float] = {}
     marks = {"t": t0, "stage": "setup"}
 
-    with staged_output(args.out) as stage, tqdm(total=chunks + spec.starts + 1, desc="optimise", unit="step") as bar:
+    steps = chunks + spec.starts + 1 + (0 if args.no_maps else 1)
+    with staged_output(args.out) as stage, tqdm(total=steps, desc="optimise", unit="step") as bar:
         def progress(stage_name: str, done: bool) -> None:
             now = time.perf_counter()
             timing[marks["stage"]] = timing.get(marks["stage"], 0.0) + now - marks["t"]
@@ -217,17 +220,21 @@ def run(args: argparse.Namespace) -> int:
             if not done:
                 bar.set_postfix_str(f"{stage_name} (compiling on first use)" if stage_name != "maps" else stage_name)
                 return
-            if stage_name == "search" and bar.n >= bar.total - 1:
+            if stage_name == "search" and bar.n >= bar.total - (1 if args.no_maps else 2):
                 bar.total += 1  # BFGS once more, from the grid's best cell
             bar.set_postfix_str(stage_name)
             bar.update(1)
 
-        result = search(rig, floor, progress)
+        # The BFGS program compiles on a second thread while the landscape runs.
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            compiled = pool.submit(compile_minimiser, rig, floor)
+            result = search(rig, floor, progress, minimiser=compiled.result)
         seconds = time.perf_counter() - t0
         maps = []
         if not args.no_maps:
             from runtime.layout_plots import floor_figure, landscape_figure
 
+            bar.set_postfix_str("plots")
             for quantities, name in ((["face_px"], "face_px_map.png"), (["variance"], "variance_map.png"),
                                      (["var_sin_pan", "var_tan_tilt"], "pan_tilt_map.png")):
                 floor_figure(floor, rig, result, quantities, stage / name)
@@ -235,6 +242,7 @@ def run(args: argparse.Namespace) -> int:
             landscape_figure(result, rig, stage / "landscape.png")
             maps.append("landscape.png")
             timing["plots"] = time.perf_counter() - marks["t"]
+            bar.update(1)
         report = layout_report(result, rig, seconds, timing, str(args.config))
         report["maps"] = maps
         report["compile_cache"] = cache
