@@ -80,13 +80,18 @@ def _enable_cache(args) -> str | None:
     return str(path)
 
 
-def _layout_keys(layout, box=None) -> dict:
+#: How ``layout.json`` names each placement variable (and its unit).
+JSON_KEYS = {"D_c": "D_c_m", "H_f": "H_f_m", "theta_c": "theta_c_deg", "H_o": "H_o_m"}
+
+
+def _json_values(names, values) -> dict:
+    """Placement variables as ``layout.json`` writes them: metres, and degrees for theta_c."""
+    return {JSON_KEYS[n]: math.degrees(float(v)) if n == "theta_c" else float(v) for n, v in zip(names, values)}
+
+
+def _layout_keys(layout) -> dict:
     d = layout.as_dict()
-    theta = d["theta_c"]
-    if box is not None:
-        theta = float(box.wrap([d[n] for n in box.names])[box.names.index("theta_c")]) if "theta_c" in box.names \
-            else theta
-    return {"D_c_m": d["D_c"], "H_f_m": d["H_f"], "theta_c_deg": math.degrees(theta), "H_o_m": d["H_o"]}
+    return _json_values(d.keys(), d.values())
 
 
 def _findings(result, rig) -> dict | None:
@@ -138,13 +143,11 @@ def layout_report(result, rig, seconds: float, timing: dict, config: str) -> dic
     sense = SENSE[spec.objective]
     box = result.box
     gain = sense * (result.grid_objective - result.objective) / abs(result.grid_objective)
-    bounds = {}
-    for n, lo, hi in zip(box.names, box.lower, box.upper):
-        lo, hi = float(lo), float(hi)
-        bounds[n] = [math.degrees(lo), math.degrees(hi)] if n == "theta_c" else [lo, hi]
+    lower, upper = _json_values(box.names, box.lower), _json_values(box.names, box.upper)
+    bounds = {k: [lower[k], upper[k]] for k in lower}
     return {
         "config": config,
-        **_layout_keys(result.best, box),
+        **_layout_keys(result.best),
         "objective": result.objective,
         "objective_start": result.objective_start,
         "objective_name": spec.objective,
@@ -152,7 +155,7 @@ def layout_report(result, rig, seconds: float, timing: dict, config: str) -> dic
         "sense": "max" if sense < 0 else "min",
         "units": "px" if spec.objective == "face_px" else "rad^2",
         "start": _layout_keys(result.configured),
-        "grid_best": {**_layout_keys(result.grid_best, box), "objective": result.grid_objective},
+        "grid_best": {**_layout_keys(result.grid_best), "objective": result.grid_objective},
         "vs_grid_rel": gain,
         "on_bound": result.on_bound,
         "vary": list(box.names),
@@ -161,7 +164,7 @@ def layout_report(result, rig, seconds: float, timing: dict, config: str) -> dic
             "method": "optimistix.BFGS on u, x = lower + (upper - lower) (1 + sin u) / 2",
             "iterations": sum(s.steps for s in result.starts),
             "polished_from_grid": result.polished_from_grid,
-            "starts": [{"from": dict(zip(box.names, map(float, s.start))), "to": dict(zip(box.names, map(float, s.x))),
+            "starts": [{"from": _json_values(box.names, s.start), "to": _json_values(box.names, s.x),
                         "objective": s.objective, "iterations": s.steps, "converged": s.converged}
                        for s in result.starts],
             **({"sharpness": list(SHARPNESS)} if spec.statistic == "worst" else {}),
