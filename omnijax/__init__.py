@@ -43,9 +43,11 @@ from ._chroma import chromaticity, chromaticity_covariance  # noqa: E402
 from ._config import (  # noqa: E402
     INPUT_NAMES,
     INPUT_UNITS,
+    LAYOUT_NAMES,
     ConfigError,
     Detection,
     Foveal,
+    LayoutSearch,
     Lens,
     Person,
     Rig,
