@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float, UInt8
 
-from ._chroma import chromaticity, chromaticity_covariance
+from ._chroma import chromaticity_planes
 
 
 class Background(eqx.Module):
@@ -68,6 +68,37 @@ def learn_background(frames: UInt8[ArrayLike, "N H W 3"], sigma=None, floor=0.5)
     return Background(mean=mean, var_factor=1.0 / n[..., 0].astype(jnp.float32), sigma=sigma)
 
 
+class ReferenceTerms(eqx.Module):
+    """What d^2 needs of the background, per sample: its chromaticity, eq 5's covariance
+    entries per unit noise variance scaled by ``var_factor``, and whether it is unclipped."""
+
+    r: Float[Array, "*b"]
+    g: Float[Array, "*b"]
+    rr: Float[Array, "*b"]
+    rg: Float[Array, "*b"]
+    gg: Float[Array, "*b"]
+    unclipped: Bool[Array, "*b"]
+
+
+def reference_terms(background: Float[ArrayLike, "*b 3"], var_factor: Float[ArrayLike, "*#b"]) -> ReferenceTerms:
+    """The background's half of eq 6-7, computed once per background update."""
+    planes = _planes(background)
+    r, g, rr, rg, gg = chromaticity_planes(*planes)
+    v = jnp.asarray(var_factor, jnp.float32)
+    return ReferenceTerms(r=r, g=g, rr=v * rr, rg=v * rg, gg=v * gg, unclipped=_inside(planes, 1.0, 254.0))
+
+
+def change_against(current: Float[ArrayLike, "*b 3"], ref: ReferenceTerms, sigma: Float[ArrayLike, "*#b"]) -> Float[Array, "*b"]:
+    """d^2 of eq 6-7 (corrected) of ``current`` against precomputed background terms."""
+    cur = _planes(current)
+    r1, g1, a1, b1, c1 = chromaticity_planes(*cur)
+    s2 = jnp.asarray(sigma, jnp.float32) ** 2
+    a, b, c = s2 * (a1 + ref.rr), s2 * (b1 + ref.rg), s2 * (c1 + ref.gg)
+    dx, dy = r1 - ref.r, g1 - ref.g
+    d2 = (c * dx * dx - 2 * b * dx * dy + a * dy * dy) / (a * c - b * b)
+    return jnp.where(_inside(cur, 0.5, 254.5) & ref.unclipped, d2, 2.0)
+
+
 def change_measure(current: Float[ArrayLike, "*b 3"], background: Float[ArrayLike, "*b 3"],
                    var_factor: Float[ArrayLike, "*#b"], sigma: Float[ArrayLike, "*#b"]) -> Float[Array, "*b"]:
     """d^2 of eq 6-7 (corrected) between current and background colours, any batch shape.
@@ -75,28 +106,22 @@ def change_measure(current: Float[ArrayLike, "*b 3"], background: Float[ArrayLik
     ``var_factor`` scales eq 5's covariance at the background colour (1 / N for a
     mean of N frames); the current colour contributes its own eq 5 covariance;
     ``sigma`` is the sensor noise (grey levels), per sample or one for all.
+    Clipped samples (a channel at 0 or 255, now or in the background) are not
+    illumination invariant: they carry no evidence and count at the measure's mean, 2.
     """
-    current = jnp.asarray(current, jnp.float32)
-    background = jnp.asarray(background, jnp.float32)
-    delta = chromaticity(current) - chromaticity(background)
-    unclipped = _unclipped(current, background)
-    cov = (chromaticity_covariance(current, sigma)
-           + jnp.asarray(var_factor)[..., None, None] * chromaticity_covariance(background, sigma))
-    a, b, c = cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1]
-    dx, dy = delta[..., 0], delta[..., 1]
-    d2 = (c * dx * dx - 2 * b * dx * dy + a * dy * dy) / (a * c - b * b)
-    return jnp.where(unclipped, d2, 2.0)
+    return change_against(current, reference_terms(background, var_factor), sigma)
 
 
-def _unclipped(current, background) -> Array:
-    """Samples whose channels are all strictly inside the 8-bit range, now and in the background.
+def _planes(rgb) -> tuple[Array, Array, Array]:
+    rgb = jnp.asarray(rgb, jnp.float32)
+    return rgb[..., 0], rgb[..., 1], rgb[..., 2]
 
-    A clipped channel (0 or 255) no longer scales with the light, so its chromaticity is not
-    illumination invariant: such samples carry no evidence and count at their background
-    mean (the measure's degrees of freedom), which keeps the radial sums' scale.
-    """
-    inside = lambda v, lo, hi: jnp.all((v > lo) & (v < hi), axis=-1)  # noqa: E731
-    return inside(current, 0.5, 254.5) & inside(background, 1.0, 254.0)
+
+def _inside(planes, lo: float, hi: float) -> Array:
+    """All three channel planes strictly inside ``(lo, hi)`` (not clipped)."""
+    lowest = jnp.minimum(jnp.minimum(planes[0], planes[1]), planes[2])
+    highest = jnp.maximum(jnp.maximum(planes[0], planes[1]), planes[2])
+    return (lowest > lo) & (highest < hi)
 
 
 def grey_change_measure(current: Float[ArrayLike, "*b 3"], background: Float[ArrayLike, "*b 3"],
@@ -106,11 +131,10 @@ def grey_change_measure(current: Float[ArrayLike, "*b 3"], background: Float[Arr
     ``(I - I_b)^2 / ((1 + var_factor) sigma^2 / 3)`` with ``I`` the mean of R, G, B:
     what the detector sees without illumination invariance (for comparison only).
     """
-    current = jnp.asarray(current, jnp.float32)
-    background = jnp.asarray(background, jnp.float32)
-    d = current.mean(-1) - background.mean(-1)
+    cur, bgr = _planes(current), _planes(background)
+    d = (sum(cur) - sum(bgr)) / 3.0
     d2 = d * d / ((1.0 + jnp.asarray(var_factor)) * jnp.asarray(sigma) ** 2 / 3.0)
-    return jnp.where(_unclipped(current, background), d2, 1.0)
+    return jnp.where(_inside(cur, 0.5, 254.5) & _inside(bgr, 1.0, 254.0), d2, 1.0)
 
 
 #: Change measures by name, with their degrees of freedom per background sample.

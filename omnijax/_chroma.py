@@ -18,8 +18,8 @@ S_MIN = 1.0
 def chromaticity(rgb: Float[ArrayLike, "*b 3"]) -> Float[Array, "*b 2"]:
     """``(r, g) = (R, G) / (R + G + B)``; at ``S < S_MIN`` the sum is taken as ``S_MIN``."""
     rgb = jnp.asarray(rgb)
-    S = jnp.maximum(rgb.sum(-1, keepdims=True), S_MIN)
-    return rgb[..., :2] / S
+    r, g = chromaticity_planes(rgb[..., 0], rgb[..., 1], rgb[..., 2])[:2]
+    return jnp.stack([r, g], -1)
 
 
 def chromaticity_covariance(rgb: Float[ArrayLike, "*b 3"], sigma) -> Float[Array, "*b 2 2"]:
@@ -29,11 +29,19 @@ def chromaticity_covariance(rgb: Float[ArrayLike, "*b 3"], sigma) -> Float[Array
     [., 1 - 2G/S + 3G^2/S^2]]``, with ``S`` floored at ``S_MIN``.
     """
     rgb = jnp.asarray(rgb)
-    R, G = rgb[..., 0], rgb[..., 1]
-    S = jnp.maximum(rgb.sum(-1), S_MIN)
-    r, g = R / S, G / S
-    k = sigma**2 / S**2
-    rr = k * (1 - 2 * r + 3 * r * r)
-    gg = k * (1 - 2 * g + 3 * g * g)
-    rg = k * (-(r + g) + 3 * r * g)
-    return jnp.stack([jnp.stack([rr, rg], -1), jnp.stack([rg, gg], -1)], -2)
+    _, _, rr, rg, gg = chromaticity_planes(rgb[..., 0], rgb[..., 1], rgb[..., 2])
+    k = jnp.asarray(sigma) ** 2
+    return k[..., None, None] * jnp.stack([jnp.stack([rr, rg], -1), jnp.stack([rg, gg], -1)], -2)
+
+
+def chromaticity_planes(R: Float[ArrayLike, "*b"], G: Float[ArrayLike, "*b"], B: Float[ArrayLike, "*b"]):
+    """``(r, g)`` and eq 5's covariance entries per unit noise variance, ``(r, g, rr, rg, gg)``.
+
+    Channel planes in, planes out: the elementwise form the per-pixel kernels use
+    (arrays with a trailing axis of 3 vectorise poorly on the CPU).
+    """
+    S = jnp.maximum(R + G + B, S_MIN)
+    inv = 1.0 / S
+    r, g = R * inv, G * inv
+    k = inv * inv
+    return r, g, k * (1 - 2 * r + 3 * r * r), k * (-(r + g) + 3 * r * g), k * (1 - 2 * g + 3 * g * g)
