@@ -9,7 +9,10 @@ maximum a posteriori hypothesis is (eq 12 with its signs corrected)
 
 evaluated for every ``i`` at once with prefix sums. ``sigma_r_f`` comes from a
 vmapped Monte Carlo: profiles drawn with the measured contrast (background radii
-chi2(2 w), person radii noncentral chi2(2 w, w c)) re-run through the estimator.
+chi2(2 w), person radii noncentral chi2(2 w, w c)) for a person whose height is
+drawn from the prior (its outer end moves by ``d r_out / d H_p`` times the draw, the
+derivative by autodiff), re-run through the estimator; the root mean square error
+of the axis foot, with the 1-pixel quantisation of the inner end added.
 Because the estimator is the same at every frame, the Monte Carlo is tabulated
 once over (hypothesis, contrast) and interpolated per detection.
 """
@@ -49,17 +52,19 @@ def foot_estimate(profile: Float[Array, " R"], pixels: Float[Array, " R"], polar
 
 
 def foot_sigma_mc(polar: PolarIndex, i, contrast, key: PRNGKeyArray, n_profiles: int,
-                  dof_per_sample: int = 2) -> Array:
-    """Standard deviation (px, of the axis foot's image radius) of the estimate for a person at ``i``."""
+                  dof_per_sample: int = 2, sigma_H_p=0.0) -> Array:
+    """Root mean square error (px, of the axis foot's image radius) for a person at ``i``."""
     w = polar.window_px
     r = jnp.arange(w.shape[0])
-    on = (r >= i) & (r < polar.hyp_out[i])
-    kb, ko = jax.random.split(key)
+    kb, ko, kh = jax.random.split(key, 3)
+    out = jnp.round(polar.hyp_out[i] + polar.hyp_dout_dH[i] * sigma_H_p * jax.random.normal(kh, (n_profiles, 1)))
+    on = (r >= i) & (r < out)
     bg = chi2_variate(kb, dof_per_sample * w, (n_profiles, w.shape[0]))
     obj = noncentral_chi2_variate(ko, dof_per_sample * w, w * contrast, (n_profiles, w.shape[0]))
     profiles = jnp.where(on, obj, bg)
     est = jax.vmap(lambda p: jnp.argmax(foot_scores(p, polar)))(profiles)
-    return jnp.std(polar.hyp_r_f[est])
+    slope = polar.hyp_r_f[jnp.minimum(i + 1, w.shape[0] - 1)] - polar.hyp_r_f[i]
+    return jnp.sqrt(jnp.mean((polar.hyp_r_f[est] - polar.hyp_r_f[i]) ** 2) + slope**2 / 12)
 
 
 class FootSigmaTable(eqx.Module):
@@ -71,7 +76,7 @@ class FootSigmaTable(eqx.Module):
 
 
 def build_foot_sigma_table(polar: PolarIndex, key: PRNGKeyArray, n_profiles: int, dof_per_sample: int = 2,
-                           n_index: int = 16, contrasts=(0.25, 0.5, 1, 2, 4, 8, 16, 64)) -> FootSigmaTable:
+                           sigma_H_p=0.0, n_index: int = 16, contrasts=(0.25, 0.5, 1, 2, 4, 8, 16, 64)) -> FootSigmaTable:
     """Tabulate :func:`foot_sigma_mc` over the valid hypotheses and a range of contrasts."""
     valid = jnp.nonzero(polar.hyp_ok)[0]
     grid = jnp.round(jnp.linspace(valid[0], valid[-1], n_index)).astype(jnp.int32)
@@ -80,7 +85,7 @@ def build_foot_sigma_table(polar: PolarIndex, key: PRNGKeyArray, n_profiles: int
     keys = jax.random.split(key, ii.size)
     # one cell at a time (lax.map): vmapping the Gamma sampler's rejection loops over every
     # cell at once makes all of them wait for the slowest lane
-    cell = lambda args: foot_sigma_mc(polar, args[0], args[1], args[2], n_profiles, dof_per_sample)  # noqa: E731
+    cell = lambda args: foot_sigma_mc(polar, args[0], args[1], args[2], n_profiles, dof_per_sample, sigma_H_p)  # noqa: E731
     table = jax.jit(lambda a, b, k: jax.lax.map(cell, (a, b, k)))(ii.ravel(), cc.ravel(), keys)
     return FootSigmaTable(index=grid.astype(jnp.float64), log_contrast=jnp.log(c), sigma=table.reshape(ii.shape))
 

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from ._camera import RadialProfile
+from ._people import SHOULDER
 
 #: Largest ray angle accepted for a floor point: R_p <= 100 H_o.
 PHI_FLOOR_MAX = math.atan(100.0)
@@ -151,7 +152,7 @@ def person_image_extent(R, omni, H_p, R_h, body_radius) -> tuple[Array, Array]:
     at floor distance ``R`` (m): the paper's cylinder (footnote 3) with a head.
 
     The body is a cylinder of radius ``body_radius`` from the floor to the shoulders at
-    ``H_p - 2 R_h``, topped by a head sphere of radius ``R_h`` whose top is at ``H_p``.
+    ``SHOULDER * H_p`` (the synthetic world's people), topped by a head sphere of radius ``R_h`` whose top is at ``H_p``.
     The inner end is the body's foot nearest the omni axis (r_f of eq 1 for the floor
     point ``R - body_radius``); the outer end is the farthest imaged point of the
     shoulders or head (eq 2's r_h, generalised to the head's outline).
@@ -161,6 +162,6 @@ def person_image_extent(R, omni, H_p, R_h, body_radius) -> tuple[Array, Array]:
     a = jnp.linspace(0.0, jnp.pi, 13)
     R, H_p, R_h = R[..., None], H_p[..., None], R_h[..., None]
     rho = jnp.concatenate([jnp.broadcast_to(body_radius, R.shape), R_h * jnp.sin(a)], -1)
-    z = jnp.concatenate([H_p - 2 * R_h, H_p - R_h + R_h * jnp.cos(a)], -1)
+    z = jnp.concatenate([SHOULDER * H_p, H_p - R_h + R_h * jnp.cos(a)], -1)
     r_out = point_image_radius(R + rho, z, omni.r_m, omni.H_o, omni.profile).max(-1)
     return r_in, r_out

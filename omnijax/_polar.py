@@ -41,6 +41,7 @@ class PolarIndex(eqx.Module):
     hyp_out: Int[Array, " R"]
     hyp_ok: Bool[Array, " R"]
     hyp_r_f: Float[Array, " R"]
+    hyp_dout_dH: Float[Array, " R"]
     image_size: tuple[int, int] = eqx.field(static=True)
 
     @property
@@ -81,14 +82,21 @@ def polar_range(rig: Rig) -> tuple[float, float]:
 @jax.jit
 def _geometry_tables(rig: Rig, radii, theta):
     """Pixels of the line samples; per radius: floor radius, and the outer end and axis-foot
-    radius of a person whose inner end is there."""
+    radius of a person whose inner end, as the psi2 window sees it, is there.
+
+    The window spans the body's width across the line, so it sees the body's round base
+    start, on average over its columns, ``pi rho / 4`` before the axis (the mean of
+    ``sqrt(rho^2 - y^2)`` over ``|y| < rho``), not ``rho``.
+    """
     omni = rig.omni
     x, y = omni.to_pixel(radii[None, :], theta[:, None])
     R_floor = floor_radius(radii, omni.r_m, omni.H_o, omni.profile)[0]
     rho = body_radius(rig)
-    _, r_out = person_image_extent(R_floor + rho, omni, rig.person.H_p, rig.person.R_h, rho)
-    r_f = point_image_radius(R_floor + rho, 0.0, omni.r_m, omni.H_o, omni.profile)
-    return x, y, R_floor, r_out, r_f
+    R_axis = R_floor + 0.25 * jnp.pi * rho
+    outer = lambda H_p: person_image_extent(R_axis, omni, H_p, rig.person.R_h, rho)[1]  # noqa: E731
+    r_out, dout_dH = jax.jvp(outer, (rig.person.H_p,), (jnp.ones_like(rig.person.H_p),))
+    r_f = point_image_radius(R_axis, 0.0, omni.r_m, omni.H_o, omni.profile)
+    return x, y, R_floor, r_out, r_f, dout_dH
 
 
 def build_polar_index(rig: Rig) -> PolarIndex:
@@ -100,7 +108,7 @@ def build_polar_index(rig: Rig) -> PolarIndex:
     radii = r_min + np.arange(n_r, dtype=float)
     theta = 2 * np.pi * np.arange(det.n_theta) / det.n_theta
 
-    x, y, R_floor, r_out, hyp_r_f = (np.asarray(v) for v in _geometry_tables(rig, jnp.asarray(radii), jnp.asarray(theta)))
+    x, y, R_floor, r_out, hyp_r_f, dout_dH = (np.asarray(v) for v in _geometry_tables(rig, jnp.asarray(radii), jnp.asarray(theta)))
     xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
     inside = (xi >= 0) & (xi < W_img) & (yi >= 0) & (yi < H_img)
     flat = np.where(inside, yi * W_img + xi, 0)
@@ -125,5 +133,5 @@ def build_polar_index(rig: Rig) -> PolarIndex:
         window_ab=jnp.asarray(window_ab, dtype=jnp.float32), window_ok=jnp.asarray(window_ok),
         window_px=jnp.asarray(width),
         hyp_out=jnp.asarray(np.minimum(hyp_out, n_r), dtype=jnp.int32), hyp_ok=jnp.asarray(hyp_ok),
-        hyp_r_f=jnp.asarray(hyp_r_f), image_size=(W_img, H_img),
+        hyp_r_f=jnp.asarray(hyp_r_f), hyp_dout_dH=jnp.asarray(dout_dH), image_size=(W_img, H_img),
     )

@@ -45,13 +45,16 @@ def load_rig(path: str | Path, overrides: dict[str, dict] | None = None) -> Rig:
     return parse_rig(data, source=source, read_text=read_text)
 
 
-def load_scenario(path: str | Path) -> tuple[Rig, Scenario]:
-    """Load and validate a scenario file and the rig file it names (relative to the scenario)."""
+def load_scenario(path: str | Path, rig_overrides: dict[str, dict] | None = None) -> tuple[Rig, Scenario]:
+    """Load and validate a scenario file and the rig file it names (relative to the scenario).
+
+    ``rig_overrides`` replace keys of the rig file as in :func:`load_rig`.
+    """
     path = Path(path)
     data = read_toml(path)
     header = read_scenario_header(data, source=str(path))
     rig_path = path.parent / header.rig
     if not rig_path.is_file():
         raise ConfigError(f"{path}: rig: no such rig file {str(rig_path)!r}")
-    rig = load_rig(rig_path)
+    rig = load_rig(rig_path, rig_overrides)
     return rig, parse_scenario(data, rig, source=str(path))

@@ -212,8 +212,8 @@ def test_detects_a_painted_person(paper_detector, painted, radius, theta):
     assert float(d.r_f[k]) == pytest.approx(float(polar.hyp_r_f[i]), abs=1e-6)
     assert math.remainder(float(d.theta_f[k]) - theta, 2 * math.pi) == pytest.approx(0.0, abs=0.02)
     assert float(d.contrast[k]) > 50
-    painted_width = float(polar.window_px[i]) / float(polar.radii[i])  # rad
-    assert float(d.sigma_theta_f[k]) == pytest.approx(painted_width / (2 * 2.5758), rel=0.5)
+    step = 2 * math.pi / polar.n_theta  # the sector centre's error: its two edges' bin quantisation
+    assert float(d.sigma_theta_f[k]) == pytest.approx(step / math.sqrt(24))
 
 
 def test_empty_frame_has_no_detections(paper_detector, painted):
