@@ -37,3 +37,14 @@ def shared_data(*parts: str) -> Path:
     if not path.exists():
         pytest.skip(f"real data not available: {path} (only in the project's shared checkout)")
     return path
+
+
+@pytest.fixture(scope="session")
+def six_world():
+    """The six-people scenario (paper rig) with 400 frames of walking: built once per test session
+    (building and compiling a world takes ~20 s)."""
+    from omnijax import build_world
+    from runtime.config_io import load_scenario
+
+    rig, sc = load_scenario(CONFIGS / "scenarios" / "six_people.toml")
+    return build_world(rig, sc, n_frames=400)
