@@ -11,7 +11,7 @@ import importlib
 import sys
 
 #: Subcommands, in the order ``--help`` lists them; each is ``runtime.commands.<name>``.
-COMMANDS: tuple[str, ...] = ("variance", "validate")
+COMMANDS: tuple[str, ...] = ("variance", "validate", "render")
 
 DESCRIPTION = """\
 Dual-camera surveillance (Greiffenhagen et al., CVPR 2000) in JAX: an
