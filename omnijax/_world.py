@@ -19,7 +19,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Bool, Float, Int, UInt8, UInt32
+from jaxtyping import Array, Bool, Float, Int, UInt8, UInt32
 
 from ._chroma import chromaticity
 from ._config import Rig
@@ -349,9 +349,9 @@ def render_frame(world: World, t) -> Frame:
     return world.frame(t)
 
 
-def render_frames(world: World, ts: Int[ArrayLike, " n"]) -> Frame:
-    """Frames ``ts`` of ``world``, rendered one by one (see :func:`frame_state`) and stacked along a
-    leading axis."""
+def render_frames(world: World, ts) -> Frame:
+    """Frames ``ts`` (a sequence or 1-D array of indices) of ``world``, rendered one by one (see
+    :func:`frame_state`) and stacked along a leading axis."""
     frames = [world.frame(t) for t in np.asarray(ts, np.int64).reshape(-1)]
     if not frames:
         raise ValueError("render_frames needs at least one frame index")

@@ -21,6 +21,8 @@ from omnijax import (
     draw_true_rig,
     effective_sigma,
     omni_rays,
+    render_frame,
+    render_frames,
     walk,
     walkable,
     world_to_image,
@@ -294,3 +296,11 @@ def test_noise_statistics_empty_room():
     assert abs(r_space) < 0.01 and abs(r_time) < 0.01
     z = res.ravel() / res.std()
     assert abs(np.mean(z**3)) < 0.02 and abs(np.mean(z**4) - 3.0) < 0.05
+
+
+def test_render_frames_stacks_world_frames(six):
+    """``render_frames(world, ts)`` / ``world.frames(ts)`` equal ``world.frame(t)`` stacked."""
+    stacked = render_frames(six, [3, 7])
+    assert stacked.image.shape == (2, 480, 640, 3) and stacked.truth.r_f.shape == (2, 6)
+    assert np.array_equal(np.asarray(stacked.image[1]), np.asarray(render_frame(six, 7).image))
+    assert np.array_equal(np.asarray(six.frames(np.array([3])).truth.foot[0]), np.asarray(six.frame(3).truth.foot))
