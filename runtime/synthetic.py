@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import math
 
+import jax.numpy as jnp
 import numpy as np
 
-from omnijax import World, effective_sigma
+from omnijax import Pointing, World, effective_sigma, pointing
 
 
 def truth_line(truth) -> dict:
@@ -83,3 +84,12 @@ def world_summary(world: World) -> dict:
                   for p, i in zip(np.asarray(sc.lighting.position), np.asarray(sc.lighting.intensity))],
         "window_px": list(world.background.window),
     }
+
+
+def true_aim(world: World, person: dict) -> Pointing:
+    """eq 1-4 with the world's true rig and the true person of a ``truth.jsonl`` entry: the PTZ
+    pan/tilt that put this person's true head centre at the foveal image's centre."""
+    rig = world.true_rig
+    x = jnp.array([person["r_f"], person["theta_f"], rig.omni.H_o, rig.foveal.H_f, rig.foveal.D_c,
+                   rig.foveal.theta_c, rig.omni.r_m, person["H_p_m"], person["R_h_m"]])
+    return pointing(x, rig.omni.profile)

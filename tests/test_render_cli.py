@@ -46,6 +46,7 @@ def test_render_writes_video_truth_and_world(tmp_path, capsys, six_world):
 
 @pytest.mark.parametrize("args,expect", [
     (["--frames", "0"], "--frames"),
+    (["--frames", "10000000"], "--frames"),
     (["--frames", "2", "--png-every", "-1"], "--png-every"),
     (["--frames", "2", "--foveal-zoom", "0"], "--foveal-zoom"),
     (["--frames", "2", "--seed", "-3"], "--seed"),

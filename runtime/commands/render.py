@@ -25,6 +25,9 @@ camera and write to DIR:
 The same seed gives the same frames, bit for bit.
 """
 
+#: Upper bound on --frames (11 hours at 25 fps): the walks of all frames are simulated up front.
+MAX_FRAMES = 1_000_000
+
 CODECS = {"ffv1": ("FFV1", "omni.avi"), "mjpg": ("MJPG", "omni.avi"), "mp4v": ("mp4v", "omni.mp4")}
 
 
@@ -47,8 +50,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def _check(args) -> None:
     from runtime.cli import UsageError
 
-    if args.frames < 1:
-        raise UsageError(f"--frames: expected a number of frames >= 1, got {args.frames}")
+    if not 1 <= args.frames <= MAX_FRAMES:
+        raise UsageError(f"--frames: expected a number of frames in 1 .. {MAX_FRAMES}, got {args.frames}")
     for flag, value in (("--png-every", args.png_every), ("--foveal-every", args.foveal_every)):
         if value < 0:
             raise UsageError(f"{flag}: expected K >= 0 (0: none), got {value}")
@@ -75,19 +78,15 @@ def _write_png(path: Path, rgb) -> None:
 
 def _foveal_views(world, t: int, truth, zoom: float, stage: Path) -> int:
     """Aim the true PTZ at each visible person's true head and save the view; returns how many."""
-    import jax.numpy as jnp
+    from omnijax import render_foveal
+    from runtime.synthetic import true_aim
 
-    from omnijax import pointing, render_foveal
-
-    rig = world.true_rig
-    zoom = float(rig.foveal.lens.clamp(zoom))
+    zoom = float(world.true_rig.foveal.lens.clamp(zoom))
     count = 0
     for i, person in enumerate(truth["persons"]):
         if not person["in_image"]:
             continue
-        x = jnp.array([person["r_f"], person["theta_f"], rig.omni.H_o, rig.foveal.H_f, rig.foveal.D_c,
-                       rig.foveal.theta_c, rig.omni.r_m, person["H_p_m"], person["R_h_m"]])
-        aim = pointing(x, rig.omni.profile)
+        aim = true_aim(world, person)
         if not bool(aim.valid):
             continue
         _write_png(stage / "foveal" / f"{t:06d}_p{i}.png", render_foveal(world, t, aim.pan, aim.tilt, zoom))
