@@ -25,7 +25,7 @@ from ._calibration import (  # noqa: E402
     RigFit,
     RimPrior,
     SimulationSettings,
-    draw_true_rig,
+    draw_calibration_truth,
     fit_rig,
     simulate_calibration,
     with_mounting_sigma,
@@ -111,7 +111,18 @@ from ._people import People, Paths, draw_people, walk, walkable  # noqa: E402
 from ._render import OmniBackground, omni_rays  # noqa: E402
 from ._scenario import Scenario, parse_scenario, read_scenario_header  # noqa: E402
 from ._sensor import effective_sigma, expose, quantise  # noqa: E402
-from ._world import Frame, Truth, World, build_world, draw_true_rig, render_frame, render_frames  # noqa: E402
+from ._world import (  # noqa: E402
+    Frame,
+    FrameState,
+    Scene,
+    Truth,
+    World,
+    build_world,
+    draw_true_rig,
+    render_frame,
+    render_frames,
+    render_state,
+)
 from ._zoom import (  # noqa: E402
     ZoomChoice,
     choose_zoom,

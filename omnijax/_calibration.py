@@ -246,7 +246,7 @@ class SimulationSettings(eqx.Module):
     min_ptz_distance: Float[Array, ""]
 
 
-def draw_true_rig(key: PRNGKeyArray, rig: Rig, settings: SimulationSettings) -> Float[Array, "9"]:
+def draw_calibration_truth(key: PRNGKeyArray, rig: Rig, settings: SimulationSettings) -> Float[Array, "9"]:
     """One true rig around the configured one (its calibration sigmas), in :data:`PARAM_NAMES` order."""
     s = rig.sigmas
     mean = jnp.concatenate([
@@ -281,7 +281,7 @@ def simulate_calibration(
     positions were found. The detector measures about the configured image centre.
     """
     k_rig, k_pos, k_r, k_t, k_pan, k_tilt, k_h, k_rim = jax.random.split(key, 8)
-    truth = draw_true_rig(k_rig, rig, settings)
+    truth = draw_calibration_truth(k_rig, rig, settings)
     H_o, D_c, theta_c, H_f, pan0, tilt0, x_c, y_c, r_m = truth
     xy, enough = _floor_positions(k_pos, rig, truth, n_positions, settings.min_ptz_distance)
     true_omni = eqx.tree_at(lambda c: (c.center, c.r_m, c.H_o), rig.omni, (jnp.stack([x_c, y_c]), r_m, H_o))

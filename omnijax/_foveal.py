@@ -110,13 +110,13 @@ def head_in_view(rig: Rig, pan, tilt, zoom, head: Float[Array, "3"], R_h) -> Hea
 
 def foveal_head(world, t, person: int, pan, tilt, zoom) -> HeadView:
     """:func:`head_in_view` for ``person`` of ``world`` at frame ``t``, with the world's true rig."""
-    foot = world.paths.position[t, person]
+    foot = world.state(t).foot[person]
     head = jnp.concatenate([foot, world.people.head_z[person][None]])
     return head_in_view(world.true_rig, pan, tilt, zoom, head, world.people.R_h[person])
 
 
 @eqx.filter_jit
-def _foveal_rows(world, view: PTZView, t, row0, n_rows: int, lamp_light, ambient):
+def _foveal_rows(scene, view: PTZView, state, row0, n_rows: int):
     """Noise-free grey levels of ``n_rows`` rows of the foveal image."""
     W, _ = view.size
     y, x = jnp.meshgrid(row0 + jnp.arange(n_rows), jnp.arange(W), indexing="ij")
@@ -124,11 +124,12 @@ def _foveal_rows(world, view: PTZView, t, row0, n_rows: int, lamp_light, ambient
     d = v.forward + ((x - v.centre[0]) / v.focal)[..., None] * v.right + ((y - v.centre[1]) / v.focal)[..., None] * v.down
     d = f32(d)
     eye = v.position
-    people, bg = world.people, world.background
-    room_hit = intersect_room(world.room, eye, d)
-    surface_alb = albedo(world.room, room_hit)
-    e = lamp_irradiance(world.room, room_hit.point, room_hit.normal, bg.lamps, bg.intensity)
-    foot = f32(world.paths.position[t])
+    people, bg = scene.people, scene.background
+    lamp_light, ambient = state.lamp_light, state.ambient
+    room_hit = intersect_room(scene.room, eye, d)
+    surface_alb = albedo(scene.room, room_hit)
+    e = lamp_irradiance(scene.room, room_hit.point, room_hit.normal, bg.lamps, bg.intensity)
+    foot = f32(state.foot)
     start = room_hit.point + 1e-3 * room_hit.normal
     to_lamp = bg.lamps - start[..., None, :]
     segments = shadow_rays(jnp.broadcast_to(start[..., None, :], to_lamp.shape), to_lamp)
@@ -141,7 +142,7 @@ def _foveal_rows(world, view: PTZView, t, row0, n_rows: int, lamp_light, ambient
     for i in range(people.count):
         hit = hit_body(body(people, i, foot[i]), eye3, rays)
         nearer = hit.t < depth
-        alb = jnp.stack(body_albedo(people, i, hit, f32(world.paths.facing[t, i])), axis=-1)
+        alb = jnp.stack(body_albedo(people, i, hit, f32(state.facing[i])), axis=-1)
         ts = jnp.where(nearer, hit.t, 0.0)
         p = tuple(o + ts * c for o, c in zip(eye3, rays))
         light = ambient + lit(p, (hit.nx, hit.ny, hit.nz), bg.lamps, bg.intensity, lamp_light)
@@ -155,10 +156,10 @@ def render_foveal(world, t: int, pan, tilt, zoom, size: tuple[int, int] | None =
     room, people and light as the omni frame, seen through a pinhole at the true PTZ pose, with the
     scenario's sensor noise (one ray per pixel; for demos). ``size`` (W, H) overrides the lens's."""
     view = ptz_view(world.true_rig, pan, tilt, zoom, size)
-    lamp_light, ambient = world.schedule.lamp_light[t], world.schedule.ambient[t]
+    state = world.state(t)
     W, H = view.size
-    rows = [_foveal_rows(world, view, jnp.int32(t), jnp.int32(r0), FOVEAL_BLOCK_ROWS, lamp_light, ambient)
+    rows = [_foveal_rows(world.scene, view, state, jnp.int32(r0), FOVEAL_BLOCK_ROWS)
             for r0 in range(0, H, FOVEAL_BLOCK_ROWS)]
     linear = jnp.concatenate(rows, axis=0)[:H]
-    key = derive_key(world.noise_key, t, np.uint32(0xF0FEA1))
+    key = derive_key(world.scene.noise_key, t, np.uint32(0xF0FEA1))
     return expose(linear, world.scenario.sensor.noise_sigma, key, world.scenario.sensor.jpeg_quality)

@@ -5,8 +5,8 @@ The sensor needs an independent Gaussian per pixel and channel of every frame
 14 ms for that on one CPU core, more than the whole frame budget, so the
 renderer hashes a counter instead: two rounds of murmur3's 32-bit finaliser
 (``mix32``) keyed by two words derived from the seed and the frame index give
-the bits in about 0.25 ms, and ``sqrt(2) erfinv(2u - 1)`` turns 24-bit uniforms
-into normals (tails to 5.4 sigma). ``tests/test_sensor.py`` checks mean,
+the bits in about 0.25 ms, and ``sqrt(2) erfinv(2u - 1)`` turns 23-bit uniforms
+into normals (tails to 5.3 sigma). ``tests/test_sensor.py`` checks mean,
 variance, normality and the absence of correlation between neighbours and frames.
 
 Keys are ``uint32`` pairs; every function here is pure and jittable.
@@ -42,8 +42,9 @@ def as_u32(x: ArrayLike) -> UInt32[Array, "*b"]:
     return lax.bitcast_convert_type(x.astype(jnp.int32), jnp.uint32)
 
 
-def derive_key(key: UInt32[ArrayLike, "2"], *words: ArrayLike) -> UInt32[Array, "2"]:
-    """A new key from ``key`` and extra integers (frame index, stream id, ...)."""
+def derive_key(key: UInt32[ArrayLike, "2 *k"], *words: ArrayLike) -> UInt32[Array, "2 *b"]:
+    """A new key from ``key`` and extra integers (frame index, stream id, ...); array words give
+    an array of keys (stacked along the trailing axes)."""
     k0, k1 = jnp.asarray(key, jnp.uint32)[0], jnp.asarray(key, jnp.uint32)[1]
     for w in words:
         w = as_u32(w)
@@ -58,16 +59,17 @@ def key_from_seed(seed: int) -> UInt32[Array, "2"]:
     return derive_key(jnp.array([seed & 0xFFFFFFFF, seed >> 32], jnp.uint32), 0)
 
 
-def hash_bits(key: UInt32[ArrayLike, "2"], counter: UInt32[ArrayLike, "*b"]) -> UInt32[Array, "*b"]:
+def hash_bits(key: UInt32[ArrayLike, "2 *k"], counter: UInt32[ArrayLike, "*b"]) -> UInt32[Array, "*b"]:
     """32 random bits per counter value: ``mix32(mix32(c ^ k0) + k1)``."""
     key = jnp.asarray(key, jnp.uint32)
     return mix32(mix32(as_u32(counter) ^ key[0]) + key[1])
 
 
 def uniform(bits: UInt32[ArrayLike, "*b"]) -> Float[Array, "*b"]:
-    """Uniform on (0, 1) from the top 24 bits: ``(k + 0.5) / 2^24`` (float32, never 0 or 1)."""
-    hi = lax.convert_element_type(jnp.asarray(bits, jnp.uint32) >> 8, jnp.float32)
-    return (hi + 0.5) * jnp.float32(2.0**-24)
+    """Uniform on (0, 1) from the top 23 bits: ``(k + 0.5) / 2^23``, exact in float32 (with 24
+    bits the largest value would round to 1.0), never 0 or 1."""
+    hi = lax.convert_element_type(jnp.asarray(bits, jnp.uint32) >> 9, jnp.float32)
+    return (hi + 0.5) * jnp.float32(2.0**-23)
 
 
 def gaussian(key: UInt32[ArrayLike, "2"], shape: tuple[int, ...]) -> Float[Array, "*s"]:
@@ -77,12 +79,12 @@ def gaussian(key: UInt32[ArrayLike, "2"], shape: tuple[int, ...]) -> Float[Array
     return (jnp.float32(math.sqrt(2.0)) * lax.erf_inv(2.0 * u - 1.0)).reshape(shape)
 
 
-def lattice_uniform(key: UInt32[ArrayLike, "2"], i: ArrayLike, j: ArrayLike) -> Float[Array, "*b"]:
+def lattice_uniform(key: UInt32[ArrayLike, "2 *k"], i: ArrayLike, j: ArrayLike) -> Float[Array, "*b"]:
     """A uniform (0, 1) value attached to the integer lattice point (i, j)."""
     return uniform(hash_bits(key, mix32(as_u32(i)) ^ (as_u32(j) * jnp.uint32(GOLDEN))))
 
 
-def value_noise(key: UInt32[ArrayLike, "2"], u: Float[ArrayLike, "*b"], v: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
+def value_noise(key: UInt32[ArrayLike, "2 *k"], u: Float[ArrayLike, "*b"], v: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
     """Smooth noise in (-0.5, 0.5): lattice values interpolated with a smoothstep, period 1 in u and v."""
     u, v = jnp.asarray(u), jnp.asarray(v)
     fu, fv = jnp.floor(u), jnp.floor(v)

@@ -156,6 +156,7 @@ def _sample_goal(rig, furniture, key, pos, radius):
     return goal
 
 
+@eqx.filter_jit
 def _place(rig, furniture, key, n: int, radius, gap):
     """Initial positions: walkable and apart; ``ok`` is False if someone did not fit."""
     lo, hi = _bounds(rig)
@@ -178,13 +179,12 @@ def _clip_norm(v, limit):
 
 
 @eqx.filter_jit
-def _simulate(rig: Rig, scenario: Scenario, people: People, key: Array, n_frames: int):
+def _simulate(rig: Rig, scenario: Scenario, people: People, pos: Float[Array, "p 2"], key: Array, n_frames: int):
     crowd, n = scenario.crowd, people.count
     furniture = scenario.furniture
     dt = 1.0 / scenario.fps
     r, gap = people.radius, crowd.gap
-    k_place, k_goal, k_pause, k_steps = jax.random.split(key, 4)
-    pos, ok = _place(rig, furniture, k_place, n, r, gap)
+    k_goal, k_pause, k_steps = jax.random.split(key, 3)
     goals = jax.vmap(lambda kk, p: _sample_goal(rig, furniture, kk, p, r))(jax.random.split(k_goal, n), pos)
     kp1, kp2 = jax.random.split(k_pause)
     pause0 = jnp.where(jax.random.uniform(kp1, (n,)) < crowd.pause_probability,
@@ -231,7 +231,7 @@ def _simulate(rig: Rig, scenario: Scenario, people: People, key: Array, n_frames
 
     state0 = (pos, jnp.zeros((n, 2)), goals, pause0, facing0, jnp.zeros((n,)), jnp.zeros((n,), bool))
     _, (position, facing, moving) = lax.scan(step, state0, jnp.arange(n_frames))
-    return Paths(position=position, facing=facing, moving=moving), ok
+    return Paths(position=position, facing=facing, moving=moving)
 
 
 def walk(rig: Rig, scenario: Scenario, people: People, key: Array, n_frames: int) -> Paths:
@@ -246,10 +246,11 @@ def walk(rig: Rig, scenario: Scenario, people: People, key: Array, n_frames: int
     if n == 0:
         return Paths(position=jnp.zeros((n_frames, 0, 2)), facing=jnp.zeros((n_frames, 0, 2)),
                      moving=jnp.zeros((n_frames, 0), bool))
-    paths, ok = _simulate(rig, scenario, people, key, n_frames)
+    k_place, k_walk = jax.random.split(key)
+    pos, ok = _place(rig, scenario.furniture, k_place, n, people.radius, scenario.crowd.gap)
     if not bool(ok):
         raise ValueError(f"people.count = {n}: not everybody fits on the walkable floor")
-    return paths
+    return _simulate(rig, scenario, people, pos, k_walk, n_frames)
 
 
 # --------------------------------------------------------------------------------------

@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._camera import OmniCamera
 from ._geometry import world_to_image
@@ -116,25 +116,21 @@ def _background_rows(omni, room: Room3D, lamps, intensity, vignetting, row0, n_r
     return colour, jnp.moveaxis(irr, -1, 0), depth, gain.astype(jnp.float32)
 
 
-@eqx.filter_jit
-def _shadow_grid(omni, room: Room3D, lamps, irradiance, cells, s: int):
-    """The coarse shadow grid's segments from the surface at the centres of ``cells`` (row, column)
-    to each lamp, and each lamp's mean irradiance over those cells."""
-    y = (cells[:, 0] + 0.5) * s - 0.5
-    x = (cells[:, 1] + 0.5) * s - 0.5
-    d, _ = omni_rays(omni, x, y)
+def _shadow_starts(omni, room: Room3D, h: int, w: int, s: int) -> Float[Array, "h w 3"]:
+    """Surface points seen through the centres of the coarse shadow grid's cells, lifted off the
+    surface (the camera's viewpoint where nothing is hit)."""
+    y = (jnp.arange(h) + 0.5) * s - 0.5
+    x = (jnp.arange(w) + 0.5) * s - 0.5
+    d, _ = omni_rays(omni, x[None, :], y[:, None])
     eye = jnp.array([0.0, 0.0, 1.0], jnp.float32) * omni.H_o.astype(jnp.float32)
     hit = intersect_room(room, eye, d.astype(jnp.float32))
-    start = hit.point + 1e-3 * hit.normal
-    start = jnp.where(jnp.isfinite(hit.t)[..., None], start, eye)
-    to_lamp = lamps[:, None, :] - start[None]
-    coarse = _block_mean(irradiance, s)[:, cells[:, 0], cells[:, 1]]
-    return shadow_rays(jnp.broadcast_to(start[None], to_lamp.shape), to_lamp), coarse
+    return jnp.where(jnp.isfinite(hit.t)[..., None], hit.point + 1e-3 * hit.normal, eye)
 
 
 @eqx.filter_jit
-def _static_view(omni, room: Room3D, lamps, intensity, vignetting, antialias: int):
-    """Colour, irradiance, depth, gain and the people's rays of the whole image, cast in blocks of rows."""
+def _static_view(omni, room: Room3D, lamps, intensity, vignetting, antialias: int, downsample: int):
+    """Colour, irradiance, depth, gain and the people's rays of the whole image, cast in blocks of
+    rows, and the coarse shadow grid's surface points."""
     width, height = omni.image_size
 
     def rows(r0):
@@ -148,15 +144,15 @@ def _static_view(omni, room: Room3D, lamps, intensity, vignetting, antialias: in
         x = jnp.moveaxis(x, 0, axis)
         return x.reshape(*x.shape[:axis], -1, *x.shape[axis + 2:])[(slice(None),) * axis + (slice(0, height),)]
 
-    return join(colour), join(irr, 1), join(depth), join(gain), join(rays, 2)
+    starts = _shadow_starts(omni, room, -(-height // downsample), -(-width // downsample), downsample)
+    return join(colour), join(irr, 1), join(depth), join(gain), join(rays, 2), starts
 
 
-def _block_mean(x: Float[Array, "*b H W"], s: int) -> Float[Array, "*b h w"]:
-    """Means over s x s blocks (the image padded with edge values to a multiple of s)."""
+def _block_mean(x: np.ndarray, s: int) -> np.ndarray:
+    """Means over s x s blocks of the last two axes (NumPy; padded with edge values to a multiple of s)."""
     H, W = x.shape[-2:]
     h, w = -(-H // s), -(-W // s)
-    pad = [(0, 0)] * (x.ndim - 2) + [(0, h * s - H), (0, w * s - W)]
-    x = jnp.pad(x, pad, mode="edge")
+    x = np.pad(x, [(0, 0)] * (x.ndim - 2) + [(0, h * s - H), (0, w * s - W)], mode="edge")
     return x.reshape(*x.shape[:-2], h, s, w, s).mean(axis=(-3, -1))
 
 
@@ -181,17 +177,21 @@ def build_background(omni: OmniCamera, room: Room3D, lamps, intensity, spectrum,
     """
     width, height = omni.image_size
     lamps, intensity, spectrum = f32(lamps), f32(intensity), f32(spectrum)
-    colour, irr, depth, gain, rays = _static_view(omni, room, lamps, intensity, jnp.float32(vignetting), antialias)
-    h, w = -(-height // downsample), -(-width // downsample)
+    colour, irr, depth, gain, rays, starts = _static_view(omni, room, lamps, intensity, jnp.float32(vignetting),
+                                                          antialias, downsample)
+    h, w = starts.shape[:2]
     g = np.pad(np.asarray(gain), ((0, h * downsample - height), (0, w * downsample - width)))
     inside = g.reshape(h, downsample, w, downsample).max(axis=(1, 3)) > 0
-    cells = np.argwhere(inside).astype(np.int32)
+    cells = np.argwhere(inside)
     index = np.full((h, w), len(cells), np.int32)
     index[cells[:, 0], cells[:, 1]] = np.arange(len(cells), dtype=np.int32)
-    shadow, coarse = _shadow_grid(omni, room, lamps, irr, jnp.asarray(cells), downsample)
+    start = np.asarray(starts)[cells[:, 0], cells[:, 1]]
+    to_lamp = np.asarray(lamps)[:, None, :] - start[None]
+    coarse = _block_mean(np.asarray(irr), downsample)[:, cells[:, 0], cells[:, 1]]
+    shadow = shadow_rays(jnp.asarray(np.broadcast_to(start[None], to_lamp.shape)), jnp.asarray(to_lamp))
     return OmniBackground(
         colour=colour * spectrum * gain[..., None], irradiance=irr, depth=depth, gain=gain, rays=rays,
-        shadow=shadow, shadow_irradiance=coarse, shadow_index=jnp.asarray(index), eye=jnp.array([0.0, 0.0, 1.0], jnp.float32) * f32(omni.H_o),
+        shadow=shadow, shadow_irradiance=jnp.asarray(coarse, jnp.float32), shadow_index=jnp.asarray(index), eye=jnp.array([0.0, 0.0, 1.0], jnp.float32) * f32(omni.H_o),
         lamps=lamps, intensity=intensity, spectrum=spectrum, window=window, antialias=antialias,
         downsample=downsample,
     )
@@ -232,8 +232,8 @@ def _largest_box(omni: OmniCamera, xy, ok, radius, shoulder, head_z, R_h):
     return size.reshape(-1, 2).max(axis=0)
 
 
-def window_size(omni: OmniCamera, xy: np.ndarray, ok: np.ndarray, radius: float, shoulder: float,
-                head_z: float, R_h: float) -> tuple[int, int]:
+def window_size(omni: OmniCamera, xy: ArrayLike, ok: ArrayLike, radius: ArrayLike, shoulder: ArrayLike,
+                head_z: ArrayLike, R_h: ArrayLike) -> tuple[int, int]:
     """Smallest window (rows, columns) that holds the image of the largest person anywhere on the walkable floor.
 
     ``xy`` (..., 2) samples the floor, ``ok`` marks the walkable samples; 4 pixels of
@@ -297,9 +297,9 @@ def draw_person(bg: OmniBackground, people: People, i, foot: Float[Array, "2"], 
     eye = (bg.eye[0], bg.eye[1], bg.eye[2])
     seen = own_buffer(body_distance(b, eye, d) < depth, origin[0] >= 0)  # else recomputed per use
     cover = sum(seen[k].astype(jnp.float32) for k in range(a2)) / a2 * (gain > 0)  # not a reduce: XLA's is slow
-    rep = [c[a2 - 1] for c in d]
+    rep = tuple(c[a2 - 1] for c in d)
     for k in reversed(range(a2 - 1)):
-        rep = [jnp.where(seen[k], c[k], r) for c, r in zip(d, rep)]
+        rep = tuple(jnp.where(seen[k], c[k], r) for c, r in zip(d, rep))
     hit = hit_body(b, eye, rep)
     ts = jnp.where(jnp.isfinite(hit.t), hit.t, 0.0)
     p = tuple(o + ts * c for o, c in zip(eye, rep))

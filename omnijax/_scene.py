@@ -97,9 +97,9 @@ class Hit(eqx.Module):
     u: Float[Array, "*b"]
 
 
-def dot3(a: Float[Array, "*b 3"], b: Float[Array, "*b 3"]) -> Float[Array, "*b"]:
-    """Dot product over the last axis (of length 3), written out: XLA's CPU reductions over a
-    3-long minor axis are several times slower than the sum of products."""
+def dot3(a: Float[Array, "*a 3"], b: Float[Array, "*b 3"]) -> Array:
+    """Dot product over the last axis (of length 3; other axes broadcast), written out: XLA's
+    CPU reductions over a 3-long minor axis are several times slower than the sum of products."""
     return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
 
 
@@ -145,8 +145,9 @@ def _boxes(origin, direction, lo, hi):
     return jnp.where(hit, t_in, jnp.inf), jnp.argmax(t_near, axis=-1)
 
 
-def intersect_room(room: Room3D, origin: Float[Array, "*b 3"], direction: Float[Array, "*b 3"]) -> Hit:
-    """Nearest hit of the rays ``origin + t direction`` (t > EPS) with floor, ceiling, walls and boxes."""
+def intersect_room(room: Room3D, origin: Float[Array, "*o 3"], direction: Float[Array, "*d 3"]) -> Hit:
+    """Nearest hit of the rays ``origin + t direction`` (t > EPS; the two broadcast) with floor,
+    ceiling, walls and boxes."""
     origin, direction = jnp.broadcast_arrays(origin, direction)
     t_floor, t_ceil = _planes(origin, direction, room)
     t_wall, s_wall = _walls(origin, direction, room)

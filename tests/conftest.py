@@ -45,3 +45,14 @@ def paper_detector(paper_rig):
     from omnijax import build_detector
 
     return build_detector(paper_rig)
+
+
+@pytest.fixture(scope="session")
+def six_world():
+    """The six-people scenario (paper rig) with 400 frames of walking: built once per test session
+    (building and compiling a world takes ~20 s)."""
+    from omnijax import build_world
+    from runtime.config_io import load_scenario
+
+    rig, sc = load_scenario(CONFIGS / "scenarios" / "six_people.toml")
+    return build_world(rig, sc, n_frames=400)
