@@ -85,7 +85,7 @@ class Detections(eqx.Module):
     """Up to K people (``valid`` marks the real ones), strongest sector first.
 
     ``r_f`` (px) is the image radius of the person's axis foot, ``theta_f`` (rad) the
-    sector centre; ``sigma_theta_f`` the centre's error from its edges' quantisation;
+    sector centre; ``sigma_theta_f`` the centre's error (:func:`_foot_sigmas`);
     ``contrast`` is the per-pixel non-centrality measured along the profile;
     ``r_in``/``r_out`` (px) the person's radial extent; ``theta_l``/``theta_r`` the
     sector's edges.
@@ -132,17 +132,29 @@ def line_change(detector: Detector, frame: UInt8[Array, "H W 3"], lines: LineBac
     return jnp.where(detector.polar.line_ok, d2, 0.0).sum(-1)
 
 
-def _sector_centre_sigma(detector: Detector) -> Array:
-    """sigma (rad) of a sector's centre as the foot's azimuth.
+def _foot_sigmas(detector: Detector, i, contrast, width) -> tuple[Array, Array]:
+    """``(sigma_r_f, sigma_theta_f)`` of a detection whose foot hypothesis is ``i``.
 
-    An upright person's image is symmetric about the foot's azimuth, so the centre
-    of the sector is unbiased; its error is where the two edges fall inside their
-    lines' bins of width ``step``: uniform, ``step^2 / 12`` each, a quarter of their
-    sum for the mean. (The paper's alternative, the sector width as a 99 % interval,
-    overstates it about tenfold in the synthetic world: README, Detection.)
+    One upright person's image is symmetric about the foot's azimuth, so the sector's
+    centre is unbiased and its error is where the two edges fall inside their lines'
+    bins of width ``step``: uniform, ``step^2 / 12`` each, a quarter of their sum for the
+    mean. (The paper's alternative, the sector width as a 99 % interval, overstates it
+    about tenfold in the synthetic world: README, Detection.) A sector wider than one
+    person there (a vertical cylinder spans ``2 asin(rho / R)``) holds more than the
+    person (two people side by side, a person and a ghost): its centre is then uniform
+    over the excess width, and the centre line may miss the person's axis, so the
+    foot's radius takes a share ``min(excess / width_1, 1)`` of a uniform spread over
+    the person's extent on top of the Monte Carlo ``sigma_r_f``.
     """
-    step = 2 * jnp.pi / detector.polar.n_theta
-    return step / jnp.sqrt(24.0)
+    polar = detector.polar
+    step = 2 * jnp.pi / polar.n_theta
+    one = polar.hyp_width[i]
+    excess = jnp.maximum(width - one - step, 0.0)
+    sigma_theta = jnp.sqrt(step**2 / 24 + excess**2 / 12)
+    extent = (polar.hyp_out[i] - i).astype(jnp.float64)
+    share = jnp.minimum(excess / one, 1.0)
+    sigma_r = jnp.sqrt(foot_sigma_lookup(detector.foot_sigma, i, contrast) ** 2 + share * extent**2 / 12)
+    return sigma_r, sigma_theta
 
 
 def _sector_angles(detector: Detector, sectors):
@@ -178,12 +190,13 @@ def locate_feet(detector: Detector, frame: UInt8[Array, "H W 3"], bg: Background
     significant = profiles > th.window
     on = (r[None] >= i[:, None]) & (r[None] < out[:, None])
     valid = sectors.valid & jnp.any(significant & on, axis=-1)
+    sigma_r, sigma_theta = _foot_sigmas(detector, i, contrast, width)
     dets = Detections(
         valid=valid,
         r_f=polar.hyp_r_f[i],
         theta_f=theta_f,
-        sigma_r_f=foot_sigma_lookup(detector.foot_sigma, i, contrast),
-        sigma_theta_f=jnp.broadcast_to(_sector_centre_sigma(detector), theta_f.shape),
+        sigma_r_f=sigma_r,
+        sigma_theta_f=sigma_theta,
         contrast=contrast,
         r_in=polar.radii[i],
         r_out=polar.radii[0] + out,

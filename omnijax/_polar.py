@@ -42,6 +42,7 @@ class PolarIndex(eqx.Module):
     hyp_ok: Bool[Array, " R"]
     hyp_r_f: Float[Array, " R"]
     hyp_dout_dH: Float[Array, " R"]
+    hyp_width: Float[Array, " R"]
     image_size: tuple[int, int] = eqx.field(static=True)
 
     @property
@@ -96,7 +97,8 @@ def _geometry_tables(rig: Rig, radii, theta):
     outer = lambda H_p: person_image_extent(R_axis, omni, H_p, rig.person.R_h, rho)[1]  # noqa: E731
     r_out, dout_dH = jax.jvp(outer, (rig.person.H_p,), (jnp.ones_like(rig.person.H_p),))
     r_f = point_image_radius(R_axis, 0.0, omni.r_m, omni.H_o, omni.profile)
-    return x, y, R_floor, r_out, r_f, dout_dH
+    width = 2 * jnp.arcsin(jnp.minimum(rho / R_axis, 1.0))  # a vertical cylinder's azimuth span
+    return x, y, R_floor, r_out, r_f, dout_dH, width
 
 
 def build_polar_index(rig: Rig) -> PolarIndex:
@@ -108,7 +110,7 @@ def build_polar_index(rig: Rig) -> PolarIndex:
     radii = r_min + np.arange(n_r, dtype=float)
     theta = 2 * np.pi * np.arange(det.n_theta) / det.n_theta
 
-    x, y, R_floor, r_out, hyp_r_f, dout_dH = (np.asarray(v) for v in _geometry_tables(rig, jnp.asarray(radii), jnp.asarray(theta)))
+    x, y, R_floor, r_out, hyp_r_f, dout_dH, hyp_width = (np.asarray(v) for v in _geometry_tables(rig, jnp.asarray(radii), jnp.asarray(theta)))
     xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
     inside = (xi >= 0) & (xi < W_img) & (yi >= 0) & (yi < H_img)
     flat = np.where(inside, yi * W_img + xi, 0)
@@ -133,5 +135,6 @@ def build_polar_index(rig: Rig) -> PolarIndex:
         window_ab=jnp.asarray(window_ab, dtype=jnp.float32), window_ok=jnp.asarray(window_ok),
         window_px=jnp.asarray(width),
         hyp_out=jnp.asarray(np.minimum(hyp_out, n_r), dtype=jnp.int32), hyp_ok=jnp.asarray(hyp_ok),
-        hyp_r_f=jnp.asarray(hyp_r_f), hyp_dout_dH=jnp.asarray(dout_dH), image_size=(W_img, H_img),
+        hyp_r_f=jnp.asarray(hyp_r_f), hyp_dout_dH=jnp.asarray(dout_dH),
+        hyp_width=jnp.asarray(hyp_width), image_size=(W_img, H_img),
     )

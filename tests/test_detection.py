@@ -213,7 +213,7 @@ def test_detects_a_painted_person(paper_detector, painted, radius, theta):
     assert math.remainder(float(d.theta_f[k]) - theta, 2 * math.pi) == pytest.approx(0.0, abs=0.02)
     assert float(d.contrast[k]) > 50
     step = 2 * math.pi / polar.n_theta  # the sector centre's error: its two edges' bin quantisation
-    assert float(d.sigma_theta_f[k]) == pytest.approx(step / math.sqrt(24))
+    assert step / math.sqrt(24) * (1 - 1e-9) <= float(d.sigma_theta_f[k]) < 2 * step  # one person: no excess width
 
 
 def test_empty_frame_has_no_detections(paper_detector, painted):
