@@ -25,7 +25,7 @@ from ._camera import OmniCamera
 from ._change import MEASURES, Background, ReferenceTerms, change_against, reference_terms
 from ._config import Rig
 from ._foot import FootSigmaTable, build_foot_sigma_table, foot_estimate, foot_sigma_lookup
-from ._indexing import Thresholds, build_thresholds, hysteresis_sectors, window_profile
+from ._indexing import Thresholds, build_thresholds, gather_rgb, hysteresis_sectors, window_profile
 from ._polar import PolarIndex, build_polar_index
 
 
@@ -76,7 +76,7 @@ class LineBackground(eqx.Module):
 @jax.jit
 def line_background(detector: Detector, bg: Background) -> LineBackground:
     idx = detector.polar.line_index
-    mean, var_factor = bg.mean.reshape(-1, 3)[idx], bg.var_factor.reshape(-1)[idx]
+    mean, var_factor = gather_rgb(bg.mean, idx), bg.var_factor.reshape(-1)[idx]
     return LineBackground(mean=mean, var_factor=var_factor, sigma=bg.sigma.reshape(-1)[idx],
                           ref=reference_terms(mean, var_factor))
 
@@ -123,8 +123,7 @@ def sector_mask(theta_map: Float[Array, "H W"], dets: Detections, margin: float 
 
 def line_change(detector: Detector, frame: UInt8[Array, "H W 3"], lines: LineBackground) -> Array:
     """Steps 1-3: d^2 at every polar sample and the radial sums ``M(theta)``."""
-    idx = detector.polar.line_index
-    cur = frame.reshape(-1, 3)[idx].astype(jnp.float32)
+    cur = gather_rgb(frame, detector.polar.line_index).astype(jnp.float32)
     if detector.measure == "chromaticity":
         d2 = change_against(cur, lines.ref, lines.sigma)
     else:
@@ -181,9 +180,14 @@ def locate_feet(detector: Detector, frame: UInt8[Array, "H W 3"], bg: Background
     """
     polar, th = detector.polar, detector.thresholds
     sectors, theta_l, theta_r, theta_f, width = found
-    profiles, pixels = jax.vmap(
-        lambda t: window_profile(frame, bg.mean, bg.var_factor, bg.sigma, detector.omni, polar, t,
-                                 detector.measure))(theta_f)
+    def profile(args):
+        theta, ok = args
+        empty = jnp.zeros(polar.n_r, jnp.float32)
+        # one sector at a time, and only the sectors that exist: most frames fill few of the K
+        return jax.lax.cond(ok, lambda: window_profile(frame, bg.mean, bg.var_factor, bg.sigma, detector.omni,
+                                                       polar, theta, detector.measure), lambda: (empty, empty))
+
+    profiles, pixels = jax.lax.map(profile, (theta_f, sectors.valid))
     i, contrast = jax.vmap(lambda p, n: foot_estimate(p, n, polar, detector.dof_per_sample))(profiles, pixels)
     out = polar.hyp_out[i]
     r = jnp.arange(polar.n_r)
