@@ -48,7 +48,7 @@ from omnijax._foveal import head_in_view
 from omnijax._people import draw_people, walkable
 from omnijax._scenario import Scenario, parse_scenario
 from omnijax._sensor import expose
-from omnijax._world import World, build_world, draw_true_rig, render_frame, render_frames, render_noise_free
+from omnijax._world import World, build_world, draw_true_rig, render_frame, render_noise_free
 
 #: Containment is measured at these p_contain, for both zoom rules.
 P_CONTAIN = (0.9, 0.95, 0.99)
@@ -107,11 +107,11 @@ def table1_positions(rig: Rig, scenario: Scenario, n: int = 8) -> np.ndarray:
 
     Walkable floor here means inside the room, out of excluded zones and furniture,
     ``CLEARANCE`` from walls, ``NEAR_PTZ`` from the PTZ's foot, ``NEAR_AXIS`` from the
-    omni axis (where r_f -> 0), with the whole person inside the image. Position k lies
-    in the direction (seen from the PTZ's foot) at the (k + 1/2) / n quantile of the
-    walkable floor's directions, at a share of that ray's walkable stretch cycling
-    through 0.2, 0.5, 0.8 (different distances). Raises ``ValueError`` if there is no
-    walkable floor.
+    omni axis (where r_f -> 0), with the whole person inside the image. Positions come
+    in pairs on n / 2 directions seen from the PTZ's foot, evenly spread over the
+    directions of the walkable floor (its 2nd to 98th percentile), one at 25 % and one
+    at 75 % of the way from that ray's first to its last walkable point: near and far,
+    all around. Raises ``ValueError`` if there is no walkable floor.
     """
     fo = rig.foveal
     ptz = np.array([float(fo.D_c * jnp.cos(fo.theta_c)), float(fo.D_c * jnp.sin(fo.theta_c))])
@@ -120,23 +120,26 @@ def table1_positions(rig: Rig, scenario: Scenario, n: int = 8) -> np.ndarray:
         return np.asarray(_walkable_here(rig, scenario.furniture, jnp.asarray(pts), jnp.asarray(ptz)))
 
     outline = np.asarray(rig.room.outline)
-    lo, hi = outline.min(0), outline.max(0)
-    grid = np.stack(np.meshgrid(np.arange(lo[0], hi[0], 0.05), np.arange(lo[1], hi[1], 0.05)), -1).reshape(-1, 2)
+    x0, y0 = outline.min(0)
+    x1, y1 = outline.max(0)
+    grid = np.stack(np.meshgrid(np.arange(x0, x1, 0.05), np.arange(y0, y1, 0.05)), -1).reshape(-1, 2)
     grid = grid[ok(grid)]
     if not len(grid):
         raise ValueError(f"no walkable floor {CLEARANCE} m from the walls and {NEAR_PTZ} m from the PTZ: "
                          "the room is too small for Table 1's positions")
-    bearing = np.sort(np.arctan2(*(grid - ptz)[:, ::-1].T))
-    s = np.arange(NEAR_PTZ, np.hypot(*(hi - lo)) + 1, 0.02)
+    towards_axis = math.atan2(-ptz[1], -ptz[0]) if np.hypot(*ptz) > 1e-9 else 0.0
+    rel = np.asarray(_angle(np.arctan2(grid[:, 1] - ptz[1], grid[:, 0] - ptz[0]) - towards_axis))
+    lo, hi = np.percentile(rel, [2, 98])
+    s = np.arange(NEAR_PTZ, np.hypot(x1 - x0, y1 - y0) + 1, 0.02)
     out = []
     for k in range(n):
-        a = bearing[int((k + 0.5) / n * len(bearing))]
+        a = towards_axis + lo + (k // 2 + 0.5) / ((n + 1) // 2) * (hi - lo)
         pts = ptz + s[:, None] * np.array([math.cos(a), math.sin(a)])
-        good = ok(pts)
-        first = int(np.argmax(good))
-        end = first + int(np.argmin(good[first:])) if not good[first:].all() else len(good)
-        frac = (0.2, 0.5, 0.8)[k % 3]
-        out.append(pts[first + int(frac * (end - 1 - first))])
+        good = np.flatnonzero(ok(pts))
+        if not len(good):
+            raise ValueError(f"no walkable floor along direction {math.degrees(a):.0f} deg from the PTZ")
+        target = s[good[0]] + (0.25, 0.75)[k % 2] * (s[good[-1]] - s[good[0]])
+        out.append(pts[good[np.argmin(np.abs(s[good] - target))]])
     return np.array(out)
 
 
@@ -174,7 +177,13 @@ def prepare(rig: Rig, scenario: Scenario, seed: int = 0, foot_mc_profiles: int |
     det_rig = rig if foot_mc_profiles is None else eqx.tree_at(
         lambda r: r.detection, rig, dataclasses.replace(rig.detection, foot_mc_profiles=foot_mc_profiles))
     detector = build_detector(det_rig, jax.random.key(seed))
-    bg = jax.jit(learn_background)(render_frames(at(world, AWAY), jnp.arange(n_bg)).image)
+    linear = render_noise_free(at(world, AWAY), 0)
+    sensor = scenario.sensor
+    keys = jax.vmap(lambda j: jax.random.bits(jax.random.fold_in(jax.random.key(seed), j), (2,), jnp.uint32))(
+        jnp.arange(n_bg) + 10_000)
+    frames = jax.jit(jax.vmap(expose, (None, None, 0, None)), static_argnums=3)(
+        linear, sensor.noise_sigma, keys, sensor.jpeg_quality)
+    bg = jax.jit(learn_background)(frames)
     return Bench(rig=rig, scenario=scenario, world=world, detector=detector, bg=bg,
                  lines=line_background(detector, bg), positions=table1_positions(rig, scenario))
 
