@@ -272,32 +272,40 @@ def concat(parts):
     return jax.tree.map(lambda *a: np.concatenate([np.asarray(x) for x in a]), *parts)
 
 
-def _keys(key, i, m):
-    return jax.vmap(lambda j: jax.random.fold_in(key, j))(jnp.arange(i, i + m))
+def _keys(key, i, chunk):
+    """Keys of trials i .. i + chunk - 1: always a whole chunk (one compilation); surplus trials are dropped."""
+    return jax.vmap(lambda j: jax.random.fold_in(key, j))(jnp.arange(i, i + chunk))
+
+
+def _head(tree, m):
+    return jax.tree.map(lambda a: a[:m], tree)
 
 
 def trials(bench: Bench, foot, n: int, key, fresh: bool, chunk: int = 25,
            progress: Progress | None = None) -> Trials:
     """``n`` trials with the person standing at ``foot`` (m; :data:`AWAY` for empty frames), each an
     omni frame with fresh sensor noise, detected. With ``fresh`` every trial also draws a new true
-    rig and person and renders anew; without, the world's rig and person stay (Table 1), so the
-    frame is rendered once and only exposed per trial (the same frames, faster)."""
+    rig and person and renders anew (``chunk`` frames per call); without, the world's rig and person
+    stay (Table 1), so the frame is rendered once and only exposed per trial (the same frames,
+    faster; ``2 chunk`` per call). Calls are padded to whole chunks: one compilation per size."""
     world = at(bench.world, foot)
     parts = []
     if fresh:
+        chunk = min(chunk, n)
         for i in range(0, n, chunk):
             m = min(chunk, n - i)
-            parts.append(_fresh_chunk(world, bench.detector, bench.bg, bench.lines, _keys(key, i, m)))
+            parts.append(_head(_fresh_chunk(world, bench.detector, bench.bg, bench.lines, _keys(key, i, chunk)), m))
             if progress:
                 progress(m)
         return concat(parts)
     linear = render_noise_free(world, 0)
     tr = render_frame(world, 0).truth
     sensor = bench.scenario.sensor
-    for i in range(0, n, 2 * chunk):
-        m = min(2 * chunk, n - i)
-        parts.append(_noise_chunk(bench.detector, bench.bg, bench.lines, linear, sensor.noise_sigma,
-                                  sensor.jpeg_quality, _keys(key, i, m), tr.theta_f[0]))
+    chunk = min(2 * chunk, n)
+    for i in range(0, n, chunk):
+        m = min(chunk, n - i)
+        parts.append(_head(_noise_chunk(bench.detector, bench.bg, bench.lines, linear, sensor.noise_sigma,
+                                        sensor.jpeg_quality, _keys(key, i, chunk), tr.theta_f[0]), m))
         if progress:
             progress(m)
     det, others, over = concat(parts)
