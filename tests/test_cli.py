@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 
 import pytest
-from conftest import CONFIGS
+from conftest import CONFIGS, ROOT
 
 from runtime.cli import build_parser, main
 
@@ -73,11 +75,14 @@ def test_help_lists_every_command(capsys):
 TABLE1_ROW = {"position", "pred_var_tan_tilt", "emp_var_tan_tilt", "pred_var_sin_pan", "emp_var_sin_pan", "trials"}
 
 
-def test_validate_quick_writes_report_and_maps(tmp_path, capsys):
+def test_validate_quick_writes_report_and_maps(tmp_path):
+    # as a user runs it: a separate process (the world's renderer is type-checked by its own tests)
     out = tmp_path / "val"
-    code = main(["validate", "--config", PAPER, "--out", str(out), "--quick", "--grid-step", "24",
-                 "--trials", "8", "--fresh-trials", "8", "--empty-frames", "8"])
-    assert code == 0
+    run = subprocess.run([sys.executable, "-m", "runtime.cli", "validate", "--config", PAPER, "--out", str(out),
+                          "--quick", "--grid-step", "24", "--trials", "8", "--fresh-trials", "8",
+                          "--empty-frames", "8"], capture_output=True, text=True, cwd=ROOT, timeout=900)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "containment:" in run.stdout
     rep = json.loads((out / "report.json").read_text())
     for name in ("table1", "table1_full_propagation"):
         assert len(rep[name]) == 8
