@@ -51,8 +51,8 @@ def report_markdown(report: dict) -> str:
            f"{c['max_rel_diff']:.4f} (sampling alone gives about {c['expected_sampling_rel']:.4f}); "
            f"against the Jacobian {c['eq5_vs_jacobian_max_rel']:.1e}.", "",
            "![chroma](chroma.png)", "",
-           "`chroma.png` shows eq 5's variance over (R, G) and what Monte Carlo adds to it: noise only, "
-           "no structure.", "",
+           "`chroma.png` shows eq 5's variance over (R, G) and the Monte Carlo estimate's difference from it "
+           "(the paper's figure 9).", "",
            "## Pointing variances over the floor (eq 13/14, figure 10)", "",
            f"Over {p['points_compared']} floor points at least {p['min_distance_m']} m from the PTZ: "
            f"autodiff vs Monte Carlo {p['autodiff_vs_mc_max_rel']:.4f}, analytic (eq 13/14) vs Monte Carlo "
