@@ -120,3 +120,77 @@ def ptz_figure(maps: PtzMaps, rig: Rig, quantity: str, path: Path, min_distance:
                  f"the room or non-positive)")
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+def positions_figure(rig: Rig, positions: np.ndarray, path: Path) -> None:
+    """Table 1's positions P1-P8 on the floor plan, with the omni axis, the PTZ and the room."""
+    fig, ax = plt.subplots(figsize=(7, 5.6), constrained_layout=True)
+    draw_rig(ax, rig, floor=True, colour="k")
+    for i, (x, y) in enumerate(positions):
+        ax.plot(x, y, "o", color="C3", ms=7)
+        ax.annotate(f"P{i + 1}", (x, y), xytext=(5, 5), textcoords="offset points", color="C3", fontsize=10)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title("Table 1 positions (person standing still), omni axis (+) and PTZ (o)")
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def table1_figure(variants: dict[str, list[dict]], path: Path) -> None:
+    """Predicted / empirical variance per position, with +-2 sampling errors, for each variant
+    (columns) and quantity (rows); the band marks +-10 %. Log scale: the ratios span decades."""
+    quantities = (("tan_tilt", "var(tan tilt)"), ("sin_pan", "var(sin pan)"))
+    fig, axes = plt.subplots(2, len(variants), figsize=(6.5 * len(variants), 7.5), constrained_layout=True,
+                             squeeze=False)
+    for col, (title, rows) in enumerate(variants.items()):
+        names = [r["position"] for r in rows]
+        x = np.arange(len(rows))
+        for row_i, (q, label) in enumerate(quantities):
+            ax = axes[row_i, col]
+            ratio = np.array([r[f"ratio_{q}"] or np.nan for r in rows], float)
+            se = np.array([r[f"ratio_{q}_se"] or np.nan for r in rows], float)
+            alt = np.array([r[f"pred_var_{q}_measured_detection_sigma"] / r[f"emp_var_{q}"]
+                            if r[f"emp_var_{q}"] > 0 else np.nan for r in rows], float)
+            ax.axhspan(0.9, 1.1, color="C2", alpha=0.25, lw=0, label="+-10 %")
+            ax.errorbar(x, ratio, yerr=2 * se, fmt="o", color="C0", capsize=3,
+                        label="predicted with the detector's sigmas")
+            ax.plot(x, alt, "x", color="C1", ms=8, mew=2, label="predicted with the measured detection spread")
+            ax.axhline(1.0, color="k", lw=0.8)
+            ax.set_yscale("log")
+            ax.set_xticks(x, names)
+            ax.set_ylabel(f"{label}: predicted / empirical")
+            ax.set_title(f"{title}: {label}")
+            ax.grid(True, which="both", axis="y", alpha=0.3)
+            if row_i == 0 and col == 0:
+                ax.legend(fontsize=8, loc="best")
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def containment_figure(curve: list[dict], path: Path) -> None:
+    """Measured containment rate against p_contain for both zoom rules (95 % intervals), and the
+    median face width each gives."""
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.6), constrained_layout=True)
+    rules = sorted({c["rule"] for c in curve})
+    for i, rule in enumerate(rules):
+        pts = [c for c in curve if c["rule"] == rule]
+        p = np.array([c["p_contain"] for c in pts])
+        rate = np.array([c["rate"] for c in pts])
+        err = np.array([[c["rate"] - c["lower"], c["upper"] - c["rate"]] for c in pts]).T
+        ax.errorbar(p + (i - 0.5) * 0.002, rate, yerr=err, fmt="o-", capsize=3, label=f"rule = {rule}")
+        bx.plot(p, [c["face_px_median"] for c in pts], "o-", label=f"rule = {rule}")
+    lo = min(min(c["lower"] for c in curve), min(c["p_contain"] for c in curve)) - 0.01
+    ax.plot([lo, 1], [lo, 1], "k--", lw=0.8, label="rate = p_contain")
+    ax.set_xlabel("p_contain (asked)")
+    ax.set_ylabel("measured containment rate")
+    ax.set_title("head disc inside the foveal frame (fresh rig per trial)")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    bx.set_xlabel("p_contain (asked)")
+    bx.set_ylabel("median face width (px)")
+    bx.set_title("what the zoom gives: face pixels")
+    bx.legend()
+    bx.grid(alpha=0.3)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 
 import pytest
-from conftest import CONFIGS
+from conftest import CONFIGS, ROOT
 
 from runtime.cli import build_parser, main
 
@@ -70,11 +72,32 @@ def test_help_lists_every_command(capsys):
         assert cmd in out
 
 
-def test_validate_quick_writes_report_and_maps(tmp_path, capsys):
+TABLE1_ROW = {"position", "pred_var_tan_tilt", "emp_var_tan_tilt", "pred_var_sin_pan", "emp_var_sin_pan", "trials"}
+
+
+def test_validate_quick_writes_report_and_maps(tmp_path):
+    # as a user runs it: a separate process (the world's renderer is type-checked by its own tests)
     out = tmp_path / "val"
-    code = main(["validate", "--config", PAPER, "--out", str(out), "--quick", "--grid-step", "24"])
-    assert code == 0
+    run = subprocess.run([sys.executable, "-m", "runtime.cli", "validate", "--config", PAPER, "--out", str(out),
+                          "--quick", "--grid-step", "24", "--trials", "8", "--fresh-trials", "8",
+                          "--empty-frames", "8"], capture_output=True, text=True, cwd=ROOT, timeout=900)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "containment:" in run.stdout
     rep = json.loads((out / "report.json").read_text())
+    for name in ("table1", "table1_full_propagation"):
+        assert len(rep[name]) == 8
+        for row in rep[name]:
+            assert set(row) >= TABLE1_ROW and row["trials"] + row["missed"] == 8
+            assert row["pred_var_tan_tilt"] > 0 and row["emp_var_tan_tilt"] >= 0
+    assert set(rep["rates"]) >= {"x_f", "false_alarm_rate", "x_m", "miss_rate"}
+    assert 0 <= rep["rates"]["false_alarm_rate"] <= 1 and 0 <= rep["rates"]["miss_rate"] <= 1
+    assert set(rep["containment"]) >= {"p_contain", "rule", "rate", "trials"}
+    assert {(c["rule"], c["p_contain"]) for c in rep["containment"]["curve"]} >= {
+        (r, p) for r in ("paper", "calibrated") for p in (0.9, 0.95, 0.99)}
+    md = (out / "report.md").read_text()
+    for name in ("table1.png", "table1_positions.png", "containment.png", "chroma.png", "ptz_pan.png"):
+        assert f"]({name})" in md
+        assert (out / name).stat().st_size > 10_000
     assert set(rep["chroma"]) >= {"max_rel_diff"}
     assert set(rep["ptz"]) >= {"autodiff_vs_analytic_max_rel", "autodiff_vs_mc_max_rel", "analytic_vs_mc_max_rel"}
     assert rep["chroma"]["eq5_vs_jacobian_max_rel"] < 1e-12
