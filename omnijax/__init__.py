@@ -56,6 +56,7 @@ from ._detector import (  # noqa: E402
     build_detector,
     detect,
     line_background,
+    sector_mask,
 )
 from ._foot import FootSigmaTable, foot_estimate, foot_scores, foot_sigma_mc  # noqa: E402
 from ._geometry import (  # noqa: E402
@@ -80,6 +81,7 @@ from ._uncertainty import (  # noqa: E402
     PointingCovariance,
     gum_second_order,
     pointing_covariance,
+    pointing_covariance_full,
     pointing_covariance_mc,
     pointing_outputs,
 )

@@ -109,6 +109,15 @@ class DetectionTrace(eqx.Module):
     significant: Bool[Array, "K R"]
 
 
+@jax.jit
+def sector_mask(theta_map: Float[Array, "H W"], dets: Detections, margin: float = 0.035) -> Bool[Array, "H W"]:
+    """Pixels whose azimuth lies inside a valid detection's sector widened by ``margin`` (rad):
+    what the background must not learn from."""
+    span = jnp.mod(dets.theta_r - dets.theta_l, 2 * jnp.pi) + 2 * margin
+    offset = jnp.mod(theta_map[..., None] - dets.theta_l + margin, 2 * jnp.pi)
+    return jnp.any(dets.valid & (offset <= span), axis=-1)
+
+
 def line_change(detector: Detector, frame: UInt8[Array, "H W 3"], lines: LineBackground) -> Array:
     """Steps 1-3: d^2 at every polar sample and the radial sums ``M(theta)``."""
     idx = detector.polar.line_index

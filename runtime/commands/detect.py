@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
+
 import time
 
 HELP = "detect people (feet, sectors, sigmas) in a video file or a folder of images"
@@ -95,7 +95,7 @@ def _run_detector(args) -> int:
     import numpy as np
     from tqdm import tqdm
 
-    from omnijax import adapt_background, build_detector, detect, learn_background, line_background
+    from omnijax import adapt_background, build_detector, detect, learn_background, line_background, sector_mask
     from omnijax._polar import polar_range
     from runtime.cli import UsageError
     from runtime.config_io import load_rig
@@ -118,7 +118,7 @@ def _run_detector(args) -> int:
             detector = build_detector(rig)
             bg = learn_background(training, floor=0.5 if args.sigma_floor is None else args.sigma_floor)
             lines = line_background(detector, bg)
-            theta_map = np.asarray(rig.omni.to_polar(*np.meshgrid(np.arange(W), np.arange(H)))[1])
+            theta_map = rig.omni.to_polar(*np.meshgrid(np.arange(W), np.arange(H)))[1]
             build_s = time.perf_counter() - t_build
             r_range = polar_range(rig)
             counts, t_detect, n = [], 0.0, 0
@@ -146,8 +146,7 @@ def _run_detector(args) -> int:
                 if n % args.overlay_every == 0:
                     img = draw_detections(frame, rig, dets, r_range, f"frame {index}: {len(people)} people")
                     cv2.imwrite(str(stage / f"overlay_{index:05d}.png"), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
-                still = ~_sector_mask(theta_map, dets, valid)
-                bg = adapt_background(bg, x, jnp.asarray(still), rate)
+                bg = adapt_background(bg, x, ~sector_mask(theta_map, dets), rate)
                 lines = line_background(detector, bg)
                 n += 1
             th = detector.thresholds
@@ -165,19 +164,6 @@ def _run_detector(args) -> int:
     print(f"{n} frames, {summary['people_per_frame']:.2f} people per frame, "
           f"{summary['detect_ms_mean']:.2f} ms per frame (mean, with I/O jitter); wrote {args.out}")
     return 0
-
-
-def _sector_mask(theta_map, dets, valid):
-    """Pixels whose azimuth lies inside a detected sector (they are not used to adapt the background)."""
-    import numpy as np
-
-    mask = np.zeros(theta_map.shape, bool)
-    for k in np.nonzero(valid)[0]:
-        tl, tr = float(dets.theta_l[k]), float(dets.theta_r[k])
-        margin = 2 * math.pi / 180
-        span = (tr - tl) % (2 * math.pi) + 2 * margin
-        mask |= ((theta_map - tl + margin) % (2 * math.pi)) <= span
-    return mask
 
 
 def _run_change_only(args) -> int:
