@@ -1,7 +1,8 @@
 """omnijax: jitted JAX kernels of the dual-camera surveillance system (Greiffenhagen et al., CVPR 2000).
 
 Pure functions of arrays and config PyTrees: camera models, chromaticity, the
-pointing geometry, its uncertainty and the zoom. ``optimise`` and ``runtime``
+pointing geometry, its uncertainty and the zoom, and the synthetic world that
+renders omni and foveal frames with ground truth. ``optimise`` and ``runtime``
 import this package, never the reverse.
 
 Importing omnijax enables JAX's float64 (geometry, uncertainty and Monte Carlo
@@ -85,6 +86,14 @@ from ._uncertainty import (  # noqa: E402
     pointing_covariance_mc,
     pointing_outputs,
 )
+from ._foveal import HeadView, PTZView, foveal_head, head_in_view, ptz_view, render_foveal  # noqa: E402
+from ._jpeg import jpeg  # noqa: E402
+from ._noise import gaussian, key_from_seed  # noqa: E402
+from ._people import People, Paths, draw_people, walk, walkable  # noqa: E402
+from ._render import OmniBackground, omni_rays  # noqa: E402
+from ._scenario import Scenario, parse_scenario, read_scenario_header  # noqa: E402
+from ._sensor import effective_sigma, expose, quantise  # noqa: E402
+from ._world import Frame, Truth, World, build_world, draw_true_rig, render_frame, render_frames  # noqa: E402
 from ._zoom import (  # noqa: E402
     ZoomChoice,
     choose_zoom,

@@ -79,11 +79,24 @@ def change_measure(current: Float[ArrayLike, "*b 3"], background: Float[ArrayLik
     current = jnp.asarray(current, jnp.float32)
     background = jnp.asarray(background, jnp.float32)
     delta = chromaticity(current) - chromaticity(background)
+    unclipped = _unclipped(current, background)
     cov = (chromaticity_covariance(current, sigma)
            + jnp.asarray(var_factor)[..., None, None] * chromaticity_covariance(background, sigma))
     a, b, c = cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1]
     dx, dy = delta[..., 0], delta[..., 1]
-    return (c * dx * dx - 2 * b * dx * dy + a * dy * dy) / (a * c - b * b)
+    d2 = (c * dx * dx - 2 * b * dx * dy + a * dy * dy) / (a * c - b * b)
+    return jnp.where(unclipped, d2, 2.0)
+
+
+def _unclipped(current, background) -> Array:
+    """Samples whose channels are all strictly inside the 8-bit range, now and in the background.
+
+    A clipped channel (0 or 255) no longer scales with the light, so its chromaticity is not
+    illumination invariant: such samples carry no evidence and count at their background
+    mean (the measure's degrees of freedom), which keeps the radial sums' scale.
+    """
+    inside = lambda v, lo, hi: jnp.all((v > lo) & (v < hi), axis=-1)  # noqa: E731
+    return inside(current, 0.5, 254.5) & inside(background, 1.0, 254.0)
 
 
 def grey_change_measure(current: Float[ArrayLike, "*b 3"], background: Float[ArrayLike, "*b 3"],
@@ -96,7 +109,8 @@ def grey_change_measure(current: Float[ArrayLike, "*b 3"], background: Float[Arr
     current = jnp.asarray(current, jnp.float32)
     background = jnp.asarray(background, jnp.float32)
     d = current.mean(-1) - background.mean(-1)
-    return d * d / ((1.0 + jnp.asarray(var_factor)) * jnp.asarray(sigma) ** 2 / 3.0)
+    d2 = d * d / ((1.0 + jnp.asarray(var_factor)) * jnp.asarray(sigma) ** 2 / 3.0)
+    return jnp.where(_unclipped(current, background), d2, 1.0)
 
 
 #: Change measures by name, with their degrees of freedom per background sample.

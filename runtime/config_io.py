@@ -1,11 +1,11 @@
-"""Reading rig files from disk: the only place TOML and referenced files are read."""
+"""Reading rig and scenario files from disk: the only place TOML and referenced files are read."""
 
 from __future__ import annotations
 
 import tomllib
 from pathlib import Path
 
-from omnijax import ConfigError, Rig, parse_rig
+from omnijax import ConfigError, Rig, Scenario, parse_rig, parse_scenario, read_scenario_header
 
 
 def read_toml(path: str | Path) -> dict:
@@ -31,3 +31,15 @@ def load_rig(path: str | Path) -> Rig:
         return (base / name).read_text()
 
     return parse_rig(read_toml(path), source=str(path), read_text=read_text)
+
+
+def load_scenario(path: str | Path) -> tuple[Rig, Scenario]:
+    """Load and validate a scenario file and the rig file it names (relative to the scenario)."""
+    path = Path(path)
+    data = read_toml(path)
+    header = read_scenario_header(data, source=str(path))
+    rig_path = path.parent / header.rig
+    if not rig_path.is_file():
+        raise ConfigError(f"{path}: rig: no such rig file {str(rig_path)!r}")
+    rig = load_rig(rig_path)
+    return rig, parse_scenario(data, rig, source=str(path))
