@@ -32,6 +32,7 @@ test-slow: $(STAMP)
 
 bench: $(STAMP)
 	taskset -c 0 $(BIN)/python benchmarks/bench_uncertainty.py
+	$(BIN)/python benchmarks/bench_ptz.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .hypothesis

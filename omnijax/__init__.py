@@ -1,8 +1,9 @@
 """omnijax: jitted JAX kernels of the dual-camera surveillance system (Greiffenhagen et al., CVPR 2000).
 
 Pure functions of arrays and config PyTrees: camera models, chromaticity, the
-pointing geometry, its uncertainty and the zoom, and the synthetic world that
-renders omni and foveal frames with ground truth. ``optimise`` and ``runtime``
+pointing geometry, its uncertainty, the zoom, calibration (rim fit, rig fit), change
+detection, and the synthetic world that renders omni and foveal frames with ground
+truth. ``optimise`` and ``runtime``
 import this package, never the reverse.
 
 Importing omnijax enables JAX's float64 (geometry, uncertainty and Monte Carlo
@@ -14,6 +15,21 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from ._aim import Aim, aim, aim_with_covariance  # noqa: E402
+from ._calibration import (  # noqa: E402
+    GLOBAL_NAMES,
+    PARAM_NAMES,
+    PARAM_UNITS,
+    RIM_NAMES,
+    CalibrationProblem,
+    Observations,
+    RigFit,
+    RimPrior,
+    SimulationSettings,
+    draw_true_rig,
+    fit_rig,
+    simulate_calibration,
+    with_mounting_sigma,
+)
 from ._camera import (  # noqa: E402
     PROFILES,
     Equidistant,
@@ -39,9 +55,11 @@ from ._chroma import chromaticity, chromaticity_covariance  # noqa: E402
 from ._config import (  # noqa: E402
     INPUT_NAMES,
     INPUT_UNITS,
+    LAYOUT_NAMES,
     ConfigError,
     Detection,
     Foveal,
+    LayoutSearch,
     Lens,
     Person,
     Rig,
@@ -75,6 +93,7 @@ from ._geometry import (  # noqa: E402
 )
 from ._indexing import Sectors, Thresholds, hysteresis_sectors, window_profile  # noqa: E402
 from ._polar import PolarIndex, build_polar_index, polar_range  # noqa: E402
+from ._rim import RimEdges, RimFit, fit_circle, fit_rim, rim_edges  # noqa: E402
 from ._uncertainty import (  # noqa: E402
     METHODS,
     OUTPUT_NAMES,

@@ -155,6 +155,33 @@ def _in_polygon(poly: Float[Array, "n 2"], X, Y) -> Array:
     return (jnp.sum(straddles & (X < x_cross), axis=-1) % 2) == 1
 
 
+#: The PTZ placement variables a layout search may vary (``theta_c`` in rad inside, ``_deg`` in files).
+LAYOUT_NAMES: tuple[str, ...] = ("D_c", "H_f", "theta_c", "H_o")
+
+
+class LayoutSearch(eqx.Module):
+    """What a layout search varies and optimises (the optional ``[layout]`` section).
+
+    ``lower`` and ``upper`` bound the variables of :data:`LAYOUT_NAMES` (m, rad; only
+    the varied ones are used); ``theta_c``'s box is periodic when it spans the
+    full circle. ``grid_step`` (m) spaces the floor grid the objectives average
+    over; floor points within ``near_radius`` (m) of the PTZ's foot are left out
+    of them; ``face_target_px`` outlines the operational region on the maps.
+    ``landscape`` is the number of grid values per varied variable of the global check.
+    """
+
+    vary: tuple[str, ...] = eqx.field(static=True)
+    lower: Float[Array, "4"]
+    upper: Float[Array, "4"]
+    objective: Literal["face_px", "variance"] = eqx.field(static=True)
+    statistic: Literal["mean", "worst"] = eqx.field(static=True)
+    grid_step: float = eqx.field(static=True)
+    near_radius: Float[Array, ""]
+    face_target_px: Float[Array, ""]
+    starts: int = eqx.field(static=True)
+    landscape: int = eqx.field(static=True)
+
+
 class Rig(eqx.Module):
     """A whole dual-camera set-up: what every kernel of omnijax takes."""
 
@@ -165,6 +192,7 @@ class Rig(eqx.Module):
     detection: Detection
     room: Room
     p_contain: Float[Array, ""]
+    layout: LayoutSearch
     zoom_rule: Literal["paper", "calibrated"] = eqx.field(static=True)
 
     def input_mean(self, r_f, theta_f) -> Float[Array, "*b 9"]:
@@ -318,6 +346,52 @@ class RoomSection(_Section):
     exclude: list[Polygon] = Field(default_factory=list, description="excluded floor zones")
 
 
+#: Landscape cells per varied variable when ``[layout] landscape`` is not given (by number varied).
+LANDSCAPE_DEFAULT = {1: 31, 2: 15, 3: 7, 4: 5}
+#: Most layouts the landscape may hold, and most floor points the objective may average over.
+LANDSCAPE_MAX, FLOOR_POINTS_MAX = 20_000, 20_000
+
+
+class LayoutSection(_Section):
+    vary: Annotated[list[Literal["D_c", "H_f", "theta_c", "H_o"]], Len(1, 4)] = Field(
+        default_factory=lambda: ["D_c", "H_f"], description="placement variables to search"
+    )
+    objective: Literal["face_px", "variance"] = "face_px"
+    statistic: Literal["mean", "worst"] = "mean"
+    D_c: Pair | None = Field(None, description="bounds of D_c, m")
+    H_f: Pair | None = Field(None, description="bounds of H_f, m")
+    theta_c_deg: Pair | None = Field(None, description="bounds of theta_c, deg")
+    H_o: Pair | None = Field(None, description="bounds of H_o, m (required to search H_o)")
+    grid_step: Annotated[float, Field(ge=0.02, le=2.0)] = Field(0.25, description="floor grid spacing, m")
+    near_radius: Annotated[float, Field(ge=0.1)] = Field(1.0, description="left out around the PTZ's foot, m")
+    face_target_px: Pos = Field(60.0, description="face width that bounds the operational region, px")
+    starts: Annotated[int, Field(ge=1, le=32)] = 4
+    landscape: Annotated[int, Field(ge=3, le=401)] | None = None
+
+    @model_validator(mode="after")
+    def _bounds(self):
+        if len(set(self.vary)) != len(self.vary):
+            raise ValueError(f"vary must not repeat a variable (got {self.vary})")
+        for key in ("D_c", "H_f", "theta_c_deg", "H_o"):
+            pair = getattr(self, key)
+            if pair is not None and not pair[0] < pair[1]:
+                raise ValueError(f"{key} must be [low, high] with low < high (got {pair})")
+        if self.D_c is not None and self.D_c[0] < 0:
+            raise ValueError(f"D_c bounds must be >= 0 m (got {self.D_c})")
+        if self.H_f is not None and self.H_f[0] <= 0:
+            raise ValueError(f"H_f bounds must be > 0 m (got {self.H_f})")
+        if self.theta_c_deg is not None and self.theta_c_deg[1] - self.theta_c_deg[0] > 360:
+            raise ValueError(f"theta_c_deg bounds may span at most 360 deg (got {self.theta_c_deg})")
+        if "H_o" in self.vary and self.H_o is None:
+            raise ValueError("H_o bounds [low, high] are required when vary includes H_o")
+        cells = (self.landscape or LANDSCAPE_DEFAULT[len(self.vary)]) ** len(self.vary)
+        if cells > LANDSCAPE_MAX:
+            raise ValueError(
+                f"landscape^{len(self.vary)} = {cells} layouts is more than {LANDSCAPE_MAX}; lower landscape"
+            )
+        return self
+
+
 class RigFile(_Section):
     omni: OmniSection
     foveal: FovealSection
@@ -325,12 +399,17 @@ class RigFile(_Section):
     detection: DetectionSection
     zoom: ZoomSection
     room: RoomSection
+    layout: LayoutSection = Field(default_factory=LayoutSection)
 
     @model_validator(mode="after")
     def _heights(self):
         if self.person.H_p >= self.omni.H_o:
             raise ValueError(
                 f"person.H_p = {self.person.H_p} m must be below omni.H_o = {self.omni.H_o} m"
+            )
+        if self.layout.H_o is not None and self.layout.H_o[0] <= self.person.H_p:
+            raise ValueError(
+                f"layout.H_o bounds {self.layout.H_o} must lie above person.H_p = {self.person.H_p} m"
             )
         return self
 
@@ -390,6 +469,51 @@ def _omni_camera(sec: OmniSection, read_text: Callable[[str], str] | None, sourc
     )
 
 
+def _wall_distance(outline: np.ndarray, azimuth: float) -> float | None:
+    """Distance from the omni axis along ``azimuth`` to the nearest crossing of the room's outline."""
+    d = np.array([math.cos(azimuth), math.sin(azimuth)])
+    a, b = outline, np.roll(outline, -1, axis=0)
+    e = b - a
+    denom = d[0] * e[:, 1] - d[1] * e[:, 0]
+    ok = np.abs(denom) > 1e-12
+    safe = np.where(ok, denom, 1.0)
+    dist = (a[:, 0] * e[:, 1] - a[:, 1] * e[:, 0]) / safe  # along the ray
+    frac = (a[:, 0] * d[1] - a[:, 1] * d[0]) / safe  # along the edge
+    hits = dist[ok & (dist > 1e-9) & (frac >= 0) & (frac <= 1)]
+    return float(hits.min()) if hits.size else None
+
+
+def _layout_search(f: RigFile, source: str) -> LayoutSearch:
+    """The ``[layout]`` section with its defaults filled in from the rig (see configs/paper.toml)."""
+    la, fo, pe = f.layout, f.foveal, f.person
+    outline = np.asarray(f.room.outline, float)
+    wall = _wall_distance(outline, math.radians(fo.theta_c_deg))
+    reach = wall if wall is not None else float(np.hypot(outline[:, 0], outline[:, 1]).max())
+    defaults = {
+        "D_c": (min(0.25, fo.D_c), max(fo.D_c, reach)),
+        "H_f": (min(fo.H_f, pe.H_p - pe.R_h - 0.5), max(fo.H_f, f.omni.H_o)),
+        "theta_c": (math.radians(fo.theta_c_deg - 180.0), math.radians(fo.theta_c_deg + 180.0)),
+        "H_o": (f.omni.H_o, f.omni.H_o),  # no default box: required when H_o is searched
+    }
+    given = {"D_c": la.D_c, "H_f": la.H_f, "H_o": la.H_o,
+             "theta_c": None if la.theta_c_deg is None else [math.radians(v) for v in la.theta_c_deg]}
+    bounds = [given[n] if given[n] is not None else defaults[n] for n in LAYOUT_NAMES]
+    x0, x1 = outline.min(0), outline.max(0)
+    points = math.prod(math.ceil((hi - lo) / la.grid_step) for lo, hi in zip(x0, x1))
+    if points > FLOOR_POINTS_MAX:
+        raise ConfigError(
+            f"{source}: layout.grid_step: {la.grid_step} m gives about {points} floor points over the room's "
+            f"bounding box, more than {FLOOR_POINTS_MAX}; expected a coarser step"
+        )
+    return LayoutSearch(
+        vary=tuple(n for n in LAYOUT_NAMES if n in la.vary),
+        lower=_a([b[0] for b in bounds]), upper=_a([b[1] for b in bounds]),
+        objective=la.objective, statistic=la.statistic, grid_step=float(la.grid_step),
+        near_radius=_a(la.near_radius), face_target_px=_a(la.face_target_px), starts=la.starts,
+        landscape=la.landscape or LANDSCAPE_DEFAULT[len(la.vary)],
+    )
+
+
 def parse_rig(
     data: Mapping[str, Any], *, source: str = "config", read_text: Callable[[str], str] | None = None
 ) -> Rig:
@@ -432,5 +556,5 @@ def parse_rig(
     room = Room(outline=_a(f.room.outline), exclude=tuple(_a(p) for p in f.room.exclude))
     return Rig(
         omni=omni, foveal=foveal, person=person, sigmas=sigmas, detection=detection, room=room,
-        p_contain=_a(f.zoom.p_contain), zoom_rule=f.zoom.rule,
+        p_contain=_a(f.zoom.p_contain), layout=_layout_search(f, source), zoom_rule=f.zoom.rule,
     )

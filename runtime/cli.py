@@ -11,7 +11,7 @@ import importlib
 import sys
 
 #: Subcommands, in the order ``--help`` lists them; each is ``runtime.commands.<name>``.
-COMMANDS: tuple[str, ...] = ("variance", "validate", "detect")
+COMMANDS: tuple[str, ...] = ("variance", "validate", "detect", "optimise", "calibrate", "ptz", "ptz-emulator")
 
 DESCRIPTION = """\
 Dual-camera surveillance (Greiffenhagen et al., CVPR 2000) in JAX: an
@@ -37,14 +37,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    from omnijax import ConfigError
+def _is_input_error(exc: Exception) -> bool:
+    """UsageError or omnijax.ConfigError; omnijax (and jax) is not imported for commands that never load it."""
+    config = sys.modules.get("omnijax._config")
+    return isinstance(exc, UsageError) or (config is not None and isinstance(exc, config.ConfigError))
 
+
+def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ConfigError, UsageError) as exc:
+    except Exception as exc:
+        if not _is_input_error(exc):
+            raise
         print(f"omnijax {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
@@ -53,4 +59,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # `python -m runtime.cli` runs this file as __main__: use the package's module, so that
+    # runtime.cli.UsageError raised by the commands is the class main() catches.
+    from runtime.cli import main as _main
+
+    sys.exit(_main())

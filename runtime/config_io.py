@@ -22,15 +22,27 @@ def read_toml(path: str | Path) -> dict:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
 
 
-def load_rig(path: str | Path) -> Rig:
-    """Load and validate a rig file; files it names are read relative to it."""
+def load_rig(path: str | Path, overrides: dict[str, dict] | None = None) -> Rig:
+    """Load and validate a rig file; files it names are read relative to it.
+
+    ``overrides`` ({section: {key: value}}, e.g. from command-line flags) replace
+    the file's keys before validation, so they are checked like the file's own
+    and a bad one is named by its dotted key ("... (with command-line overrides)").
+    """
     path = Path(path)
     base = path.parent
 
     def read_text(name: str) -> str:
         return (base / name).read_text()
 
-    return parse_rig(read_toml(path), source=str(path), read_text=read_text)
+    data = read_toml(path)
+    source = str(path)
+    if overrides:
+        for section, keys in overrides.items():
+            if keys:
+                data[section] = {**data.get(section, {}), **keys}
+                source = f"{path} (with command-line overrides)"
+    return parse_rig(data, source=source, read_text=read_text)
 
 
 def load_scenario(path: str | Path) -> tuple[Rig, Scenario]:

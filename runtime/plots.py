@@ -23,27 +23,33 @@ QUANTITY_LABEL = {
 }
 
 
-def draw_rig(ax, rig: Rig, min_distance: float | None = None) -> None:
-    """Omni centre, PTZ foot, room outline and excluded zones, drawn in omni-image pixels."""
+def draw_rig(ax, rig: Rig, min_distance: float | None = None, floor: bool = False, colour: str = "w") -> None:
+    """Omni centre, PTZ foot, room outline and excluded zones, drawn in omni-image pixels
+    (or, with ``floor``, in floor metres of the world frame)."""
     omni = rig.omni
-    cx, cy = np.asarray(omni.center)
-    ax.plot(cx, cy, "w+", ms=10, mew=2)
+
+    def project(X, Y):
+        return (np.asarray(X), np.asarray(Y)) if floor else world_to_image(omni, X, Y, 0.0)
+
+    cx, cy = (0.0, 0.0) if floor else np.asarray(omni.center)
+    ax.plot(cx, cy, "+", color=colour, ms=10, mew=2)
     D_c, th = float(rig.foveal.D_c), float(rig.foveal.theta_c)
-    px, py = (float(v) for v in world_to_image(omni, D_c * np.cos(th), D_c * np.sin(th), 0.0))
-    ax.plot(px, py, "o", mfc="none", mec="w", ms=9, mew=2)
-    ax.annotate("PTZ", (px, py), xytext=(6, 6), textcoords="offset points", color="w", fontsize=8)
-    for poly, style in [(rig.room.outline, "w-")] + [(z, "w:") for z in rig.room.exclude]:
+    px, py = (float(v) for v in project(D_c * np.cos(th), D_c * np.sin(th)))
+    ax.plot(px, py, "o", mfc="none", mec=colour, ms=9, mew=2)
+    ax.annotate("PTZ", (px, py), xytext=(6, 6), textcoords="offset points", color=colour, fontsize=8)
+    if floor:
+        ax.annotate("omni", (cx, cy), xytext=(6, -12), textcoords="offset points", color=colour, fontsize=8)
+    for poly, style in [(rig.room.outline, "-")] + [(z, ":") for z in rig.room.exclude]:
         pts = np.asarray(poly)
         loop = np.vstack([pts, pts[:1]])
         t = np.linspace(0, 1, 50)[:, None]
         dense = np.vstack([a + t * (b - a) for a, b in zip(loop[:-1], loop[1:])])
-        ix, iy = world_to_image(omni, dense[:, 0], dense[:, 1], 0.0)
-        ax.plot(np.asarray(ix), np.asarray(iy), style, lw=1)
+        ix, iy = project(dense[:, 0], dense[:, 1])
+        ax.plot(np.asarray(ix), np.asarray(iy), style, color=colour, lw=1)
     if min_distance:
         a = np.linspace(0, 2 * np.pi, 100)
-        ix, iy = world_to_image(omni, D_c * np.cos(th) + min_distance * np.cos(a),
-                                D_c * np.sin(th) + min_distance * np.sin(a), 0.0)
-        ax.plot(np.asarray(ix), np.asarray(iy), "w--", lw=0.8)
+        ix, iy = project(D_c * np.cos(th) + min_distance * np.cos(a), D_c * np.sin(th) + min_distance * np.sin(a))
+        ax.plot(np.asarray(ix), np.asarray(iy), "--", color=colour, lw=0.8)
 
 
 def chroma_figure(maps: dict, path: Path, blue: float, sigma: float) -> None:

@@ -144,3 +144,51 @@ def test_zoom_is_jittable_and_vmappable(paper_rig):
     out = jax.vmap(lambda a, b: aim(paper_rig, a, b))(r, th)
     assert out.zoom.zoom.shape == (16,)
     assert bool(jnp.all(jnp.isfinite(out.zoom.zoom)))
+
+
+@pytest.mark.parametrize("r_f,theta", [(100.0, 0.7), (130.0, -2.0), (45.0, 2.8)])
+def test_calibrated_zoom_gradient_matches_finite_differences(paper_rig, r_f, theta):
+    """The implicit-function-theorem gradient of the calibrated zoom (w.r.t. the pan/tilt covariance,
+    tilt, slant and p_contain) against central differences of the root itself (step 1e-4 relative;
+    for p_contain, relative to 1 - p_contain, the scale on which the zoom changes)."""
+    from tolerances import FINITE_DIFF
+
+    a = aim(paper_rig, r_f, theta)
+    lens, R_h = paper_rig.foveal.lens, paper_rig.person.R_h
+    assert bool(a.zoom.feasible) and 1.0 < float(a.zoom.zoom) < 18.0
+    assert np.min(np.abs(np.log(float(a.zoom.zoom) / np.asarray(lens.zoom)))) > 1e-3  # off the table's kinks
+    params = (a.covariance.cov, a.pointing.tilt, a.pointing.slant, paper_rig.p_contain)
+
+    @jax.jit
+    def log_zoom(cov4, tilt, slant, p):
+        return jnp.log(choose_zoom(lens, "calibrated", cov4, a.pointing.distance, tilt, slant, R_h, p).zoom)
+
+    grads = jax.jit(jax.grad(log_zoom, argnums=(0, 1, 2, 3)))(*params)
+    for i, g in enumerate(grads):
+        base = np.asarray(params[i], float)
+        for idx in [(0, 0), (1, 1), (0, 1)] if base.ndim == 2 else [()]:
+            h = 1e-4 * (1.0 - base if i == 3 else abs(base[idx]))
+            bump = np.zeros_like(base)
+            bump[idx] = h
+            if base.ndim == 2 and idx == (0, 1):
+                bump[1, 0] = h  # keep the covariance symmetric: d/d(c01) of both entries
+                expect_g = float(g[0, 1] + g[1, 0])
+            else:
+                expect_g = float(np.asarray(g)[idx])
+            args = list(params)
+            args[i] = jnp.asarray(base + bump)
+            up = float(log_zoom(*args))
+            args[i] = jnp.asarray(base - bump)
+            down = float(log_zoom(*args))
+            fd = (up - down) / (2 * h)
+            assert expect_g == pytest.approx(fd, rel=FINITE_DIFF, abs=1e-9 / h), (i, idx)
+
+
+def test_calibrated_zoom_gradient_is_zero_and_finite_where_clamped(paper_rig):
+    lens = paper_rig.foveal.lens
+    chosen = jax.jit(lambda c: choose_zoom(lens, "calibrated", c, 10.0, -0.03, 10.0, 0.1, 0.99).zoom)
+    slope = jax.jit(jax.grad(chosen))
+    for var, zoom in ((1e-12, 18.0), (1.0, 1.0)):  # the longest zoom holds the head; even the widest cannot
+        cov4 = jnp.diag(jnp.full(4, var))
+        assert float(chosen(cov4)) == zoom
+        assert np.all(np.asarray(slope(cov4)) == 0.0)

@@ -1,0 +1,317 @@
+"""PTZ device profiles: what a camera model accepts, and how it is mounted (``configs/devices/*.toml``).
+
+A profile holds the protocol and line settings, the pan/tilt ranges in the
+device's own degrees and its units per degree, the speeds, the zoom lens's
+position for each magnification, the link's timing, and the *mounting*: how
+omnijax's pan/tilt (geometry frame: pan measured at the PTZ from the direction
+of the omni camera's axis, tilt up positive, radians; DESIGN.md eq 4) map to
+the device's angles. :meth:`DeviceProfile.to_device` and
+:meth:`DeviceProfile.from_device` are the only places where angles and zoom
+factors become device units and back; every target is clamped to the limits.
+
+Profiles are validated by a strict pydantic schema (unknown keys are errors);
+every failure is a one-line :class:`ProfileError` naming the file and key.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+import pydantic
+from annotated_types import Len
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+#: Where the shipped profiles live (``configs/devices`` of the checkout).
+DEVICES_DIR = Path(__file__).resolve().parents[2] / "configs" / "devices"
+#: The profile each protocol uses when none is given.
+DEFAULT_PROFILES = {"visca": "sony_evi_d70", "pelco-d": "pelco_d_dome"}
+#: Largest magnitude of a VISCA pan/tilt position (signed 16-bit nibbles) and of any zoom position.
+_VISCA_MAX_ANGLE_UNITS = 0x7FFF
+_MAX_ZOOM_POSITION = 0xFFFF
+_PELCO_UNITS_PER_DEG = 100.0
+
+
+class ProfileError(ValueError):
+    """A device profile that cannot be used (one line: file, key, what was expected)."""
+
+
+Pos = Annotated[float, Field(gt=0)]
+Range = Annotated[list[float], Len(2, 2)]
+Direction = Literal[-1, 1]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+
+class AxisSection(_Section):
+    """One rotation axis in the device's own degrees."""
+
+    limits_deg: Range = Field(description="lowest and highest reachable angle, device degrees")
+    units_per_deg: Pos = Field(description="device position units per degree")
+    speed: int = Field(0, ge=0, description="VISCA speed code sent with absolute moves (unused by Pelco-D)")
+    max_speed: int = Field(0, ge=0, description="VISCA: highest speed code the device accepts")
+    max_speed_deg_s: Pos = Field(description="slew rate at the highest speed code, deg/s")
+
+    @model_validator(mode="after")
+    def _check(self):
+        lo, hi = self.limits_deg
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ValueError(f"expected [low, high] with low < high, got {self.limits_deg}")
+        if hi - lo > 360:
+            raise ValueError(f"range spans {hi - lo} deg, at most 360")
+        if self.speed > self.max_speed:
+            raise ValueError(f"speed {self.speed} is above max_speed {self.max_speed}")
+        return self
+
+    def slew_deg_s(self, speed: int | None = None) -> float:
+        """Slew rate (deg/s) at VISCA speed code ``speed`` (linear in the code), or the fastest."""
+        if speed is None or self.max_speed == 0:
+            return self.max_speed_deg_s
+        return self.max_speed_deg_s * speed / self.max_speed
+
+
+class ZoomSection(_Section):
+    """The lens: device zoom position at each magnification (interpolated linearly between rows)."""
+
+    magnification: Annotated[list[Annotated[float, Field(ge=1)]], Len(2)]
+    position: Annotated[list[Annotated[int, Field(ge=0, le=_MAX_ZOOM_POSITION)]], Len(2)]
+    seconds_full_range: Pos = Field(description="time to drive from wide to tele, s")
+
+    @model_validator(mode="after")
+    def _check(self):
+        if len(self.magnification) != len(self.position):
+            raise ValueError(f"magnification has {len(self.magnification)} rows, position {len(self.position)}")
+        if any(b <= a for a, b in zip(self.magnification, self.magnification[1:])):
+            raise ValueError("magnification must increase strictly")
+        if any(b <= a for a, b in zip(self.position, self.position[1:])):
+            raise ValueError("position must increase strictly")
+        return self
+
+
+class MountingSection(_Section):
+    """How the geometry's pan/tilt map to the device's: ``device = direction * geometry + zero``."""
+
+    pan_zero_deg: float = Field(0.0, description="device pan when the PTZ looks toward the omni camera's axis")
+    pan_direction: Direction = Field(1, description="+1: device pan grows with omnijax pan; -1: opposite")
+    tilt_zero_deg: float = Field(0.0, description="device tilt when the PTZ looks level")
+    tilt_direction: Direction = Field(1, description="+1: device tilt grows upward; -1: downward")
+
+
+class LinkSection(_Section):
+    """Timing of the serial link (seconds)."""
+
+    ack_timeout_s: Pos = 0.5
+    completion_timeout_s: Pos = 10.0
+    min_interval_s: Annotated[float, Field(ge=0)] = 0.05
+    retry_delay_s: Pos = 0.05
+    reconnect_backoff_s: Annotated[list[Pos], Len(2, 2)] = [0.05, 0.5]
+    max_silent: Annotated[int, Field(ge=1)] = 3
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.reconnect_backoff_s[0] > self.reconnect_backoff_s[1]:
+            raise ValueError(f"reconnect_backoff_s: expected [first, longest], got {self.reconnect_backoff_s}")
+        return self
+
+
+class PelcoDSection(_Section):
+    """Pelco-D options."""
+
+    general_response: bool = Field(True, description="the device answers each command with a general response")
+
+
+@dataclass(frozen=True)
+class DeviceTarget:
+    """A target in device units (what goes on the wire) and which axes had to be clamped."""
+
+    pan: int
+    tilt: int
+    zoom: int
+    clamped: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class PtzPosition:
+    """A pan/tilt/zoom in omnijax's frame: radians (pan from the omni axis, tilt up) and a zoom factor.
+
+    ``units`` are the device's (pan, tilt, zoom) it was converted from, where it was.
+    """
+
+    pan: float
+    tilt: float
+    zoom: float
+    units: tuple[int, int, int] | None = None
+
+    @property
+    def pan_deg(self) -> float:
+        return math.degrees(self.pan)
+
+    @property
+    def tilt_deg(self) -> float:
+        return math.degrees(self.tilt)
+
+
+class DeviceProfile(_Section):
+    """A validated device profile; see ``configs/devices/sony_evi_d70.toml`` for every key."""
+
+    name: str
+    protocol: Literal["visca", "pelco-d"]
+    address: Annotated[int, Field(ge=1, le=255)]
+    baudrate: Annotated[int, Field(gt=0)] = 9600
+    pan: AxisSection
+    tilt: AxisSection
+    zoom: ZoomSection
+    mounting: MountingSection = MountingSection()
+    link: LinkSection = LinkSection()
+    pelco_d: PelcoDSection = PelcoDSection()
+
+    @model_validator(mode="after")
+    def _protocol_ranges(self):
+        if self.protocol == "visca":
+            if self.address > 7:
+                raise ValueError(f"address: VISCA cameras are 1-7, got {self.address}")
+            for axis in ("pan", "tilt"):
+                sec = getattr(self, axis)
+                if not 1 <= sec.speed <= sec.max_speed <= 0x7F:
+                    raise ValueError(f"{axis}.speed, {axis}.max_speed: VISCA needs 1 <= speed <= max_speed "
+                                     f"<= 127, got {sec.speed}, {sec.max_speed}")
+                if max(abs(v) for v in sec.limits_deg) * sec.units_per_deg > _VISCA_MAX_ANGLE_UNITS:
+                    raise ValueError(f"{axis}.limits_deg: beyond VISCA's signed 16-bit position")
+        else:
+            for axis in ("pan", "tilt"):
+                if getattr(self, axis).units_per_deg != _PELCO_UNITS_PER_DEG:
+                    raise ValueError(f"{axis}.units_per_deg: Pelco-D positions are hundredths of a degree, "
+                                     f"expected 100, got {getattr(self, axis).units_per_deg}")
+        return self
+
+    # ------------------------------------------------------------------------------------
+    # The conversions (the only place angles and zoom factors become device units)
+    # ------------------------------------------------------------------------------------
+
+    @property
+    def pan_continuous(self) -> bool:
+        """Whether pan turns all the way round (its range spans 360 deg)."""
+        lo, hi = self.pan.limits_deg
+        return hi - lo >= 360
+
+    def device_pan_deg(self, pan: float) -> float:
+        """Device pan (deg, unclamped) for omnijax pan ``pan`` (rad): taken modulo 360 into the
+        360-degree window centred on the device's range."""
+        m = self.mounting
+        deg = m.pan_direction * math.degrees(pan) + m.pan_zero_deg
+        centre = 0.5 * sum(self.pan.limits_deg)
+        return centre + (deg - centre + 180.0) % 360.0 - 180.0
+
+    def device_tilt_deg(self, tilt: float) -> float:
+        """Device tilt (deg, unclamped) for omnijax tilt ``tilt`` (rad)."""
+        m = self.mounting
+        return m.tilt_direction * math.degrees(tilt) + m.tilt_zero_deg
+
+    def zoom_position(self, zoom: float) -> float:
+        """Device zoom position for magnification ``zoom`` (unclamped within the table's ends)."""
+        return float(np.interp(zoom, self.zoom.magnification, self.zoom.position))
+
+    def to_device(self, pan: float, tilt: float, zoom: float) -> DeviceTarget:
+        """omnijax pan, tilt (rad) and zoom factor -> device units, clamped to the device's limits.
+
+        ``clamped`` names the axes that were outside the limits (and moved onto them).
+        """
+        if not all(math.isfinite(v) for v in (pan, tilt, zoom)):
+            raise ValueError(f"PTZ target must be finite, got pan={pan}, tilt={tilt}, zoom={zoom}")
+        clamped = []
+        pan_deg = self.device_pan_deg(pan)
+        tilt_deg = self.device_tilt_deg(tilt)
+        values = {}
+        for axis, deg in (("pan", pan_deg), ("tilt", tilt_deg)):
+            lo, hi = getattr(self, axis).limits_deg
+            if not lo <= deg <= hi:
+                clamped.append(axis)
+            values[axis] = round(min(max(deg, lo), hi) * getattr(self, axis).units_per_deg)
+        z_lo, z_hi = self.zoom.magnification[0], self.zoom.magnification[-1]
+        if not z_lo <= zoom <= z_hi:
+            clamped.append("zoom")
+        return DeviceTarget(values["pan"], values["tilt"], round(self.zoom_position(zoom)), tuple(clamped))
+
+    def from_device(self, pan: int, tilt: int, zoom: int) -> PtzPosition:
+        """Device units -> omnijax pan (rad, in (-pi, pi]), tilt (rad) and zoom factor."""
+        m = self.mounting
+        pan_deg = (pan / self.pan.units_per_deg - m.pan_zero_deg) * m.pan_direction
+        pan_deg = -((180.0 - pan_deg) % 360.0) + 180.0
+        tilt_deg = (tilt / self.tilt.units_per_deg - m.tilt_zero_deg) * m.tilt_direction + 0.0  # no -0.0
+        mag = float(np.interp(zoom, self.zoom.position, self.zoom.magnification))
+        return PtzPosition(math.radians(pan_deg), math.radians(tilt_deg), mag, (pan, tilt, zoom))
+
+    def units_apart(self, axis: Literal["pan", "tilt", "zoom"], a: int, b: int) -> int:
+        """How far apart two device positions of ``axis`` are, in units (pan the short way round
+        when it turns fully)."""
+        d = abs(a - b)
+        if axis == "pan" and self.pan_continuous:
+            turn = round(360 * self.pan.units_per_deg)
+            d %= turn
+            d = min(d, turn - d)
+        return d
+
+    def limits_units(self, axis: Literal["pan", "tilt"]) -> tuple[int, int]:
+        """The device's range of ``axis`` in its units."""
+        sec = getattr(self, axis)
+        return round(sec.limits_deg[0] * sec.units_per_deg), round(sec.limits_deg[1] * sec.units_per_deg)
+
+    def slew_units_s(self, axis: Literal["pan", "tilt"], speed: int | None = None) -> float:
+        """Slew rate of ``axis`` in device units per second (at VISCA speed code ``speed``)."""
+        sec = getattr(self, axis)
+        return sec.slew_deg_s(speed) * sec.units_per_deg
+
+
+def _one_line(exc: pydantic.ValidationError, source: str) -> str:
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err["loc"])
+    msg = err["msg"].removeprefix("Value error, ")
+    if err["type"] == "missing":
+        msg = "missing key"
+    elif err["type"] == "extra_forbidden":
+        msg = "unknown key"
+    value = err.get("input")
+    shown = err["type"] not in ("missing", "extra_forbidden", "value_error") and not isinstance(value, dict)
+    return f"{source}: {loc or '(top level)'}: {msg}" + (f" (got {value!r})" if shown else "")
+
+
+def parse_profile(mapping: dict, source: str = "<profile>") -> DeviceProfile:
+    """Validate a profile mapping (as read from TOML); one-line :class:`ProfileError` if it is wrong."""
+    try:
+        return DeviceProfile.model_validate(mapping)
+    except pydantic.ValidationError as exc:
+        raise ProfileError(_one_line(exc, source)) from None
+
+
+def resolve_profile_path(name_or_path: str | Path) -> Path:
+    """A profile file: a path as given, or a bare name of a shipped profile (``sony_evi_d70``)."""
+    path = Path(name_or_path)
+    if path.suffix != ".toml" and path.parent == Path(".") and not path.exists():
+        return DEVICES_DIR / f"{path}.toml"
+    return path
+
+
+def load_profile(name_or_path: str | Path) -> DeviceProfile:
+    """Read and validate a profile (see :func:`resolve_profile_path`)."""
+    path = resolve_profile_path(name_or_path)
+    try:
+        with path.open("rb") as fh:
+            mapping = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ProfileError(f"{path}: no such device profile") from None
+    except IsADirectoryError:
+        raise ProfileError(f"{path}: is a directory, expected a device profile (TOML)") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ProfileError(f"{path}: not valid TOML: {exc}") from None
+    return parse_profile(mapping, source=str(path))
+
+
+def default_profile(protocol: str) -> DeviceProfile:
+    """The shipped profile for ``protocol`` (``visca`` or ``pelco-d``)."""
+    return load_profile(DEFAULT_PROFILES[protocol])
