@@ -42,8 +42,8 @@ from omnijax import (
     detect,
     line_background,
     pointing,
-    sector_mask,
     pointing_covariance_full,
+    sector_mask,
 )
 from omnijax._track import floor_measurement, image_position
 from runtime.sources import Capture, Frame
@@ -75,10 +75,23 @@ RULES = ("paper", "calibrated")
 
 @jax.jit
 def perceive(detector: Detector, rig: Rig, frame, bg, lines):
-    """Detection (steps 1-6) and the detections' floor positions with covariances."""
+    """Detection (steps 1-6) and the detections' floor positions with covariances.
+
+    The detector's sigmas cover the profile's noise only (sigma_r_f is 0 for a clear person);
+    the rig's ``[detection]`` sigmas are their floor, for what the foot model misses.
+    """
     dets, trace = detect(detector, frame, bg, lines)
-    z, R = floor_measurement(rig, dets.r_f, dets.theta_f, dets.sigma_r_f, dets.sigma_theta_f)
+    d = rig.detection
+    z, R = floor_measurement(rig, dets.r_f, dets.theta_f, jnp.maximum(dets.sigma_r_f, d.sigma_r_f),
+                             jnp.maximum(dets.sigma_theta_f, d.sigma_theta_f))
     return dets, trace, z, R
+
+
+@jax.jit
+def update_background(detector: Detector, bg, frame, theta_map, dets, rate):
+    """The background adapted where no person's sector is (``rate`` per call), and its polar lines."""
+    bg = adapt_background(bg, frame, ~sector_mask(theta_map, dets), rate)
+    return bg, line_background(detector, bg)
 
 
 @jax.jit
@@ -137,28 +150,54 @@ class LoopConfig:
     quiet: bool = False
 
 
+class Samples:
+    """The latest ``capacity`` values of a measurement in a preallocated ring buffer (memory stays
+    flat however long the loop runs); statistics are over those."""
+
+    def __init__(self, capacity: int = 65536):
+        self._buf = np.full(capacity, np.nan)  # touched now, so resident memory does not creep up
+        self.count = 0
+
+    def append(self, v: float) -> None:
+        self._buf[self.count % self._buf.size] = v
+        self.count += 1
+
+    def values(self) -> np.ndarray:
+        return self._buf[: min(self.count, self._buf.size)]
+
+    def recent(self, n: int) -> np.ndarray:
+        """The last ``n`` values (fewer at the start)."""
+        idx = np.arange(max(self.count - min(n, self._buf.size), 0), self.count) % self._buf.size
+        return self._buf[idx]
+
+    def __len__(self) -> int:
+        return self.count
+
+
 @dataclass
 class Timings:
     """Per-stage and end-to-end times (ms)."""
 
-    stages: dict[str, list[float]] = field(default_factory=lambda: {s: [] for s in STAGES})
-    latency: list[float] = field(default_factory=list)  # frame available -> command handed to the driver
-    frame: list[float] = field(default_factory=list)
+    stages: dict[str, Samples] = field(default_factory=lambda: {s: Samples() for s in STAGES})
+    latency: Samples = field(default_factory=Samples)  # frame available -> PTZ bytes written (driver's stamps)
+    compute: Samples = field(default_factory=Samples)  # frame available -> command handed to the driver
+    frame: Samples = field(default_factory=Samples)
 
     @staticmethod
-    def stats(v) -> dict:
-        a = np.asarray(v, float)
+    def stats(samples: Samples) -> dict:
+        a = samples.values()
         if not a.size:
             return {"p50": None, "p99": None, "n": 0}
         return {"p50": float(np.median(a)), "p90": float(np.percentile(a, 90)),
-                "p99": float(np.percentile(a, 99)), "max": float(a.max()), "n": int(a.size)}
+                "p99": float(np.percentile(a, 99)), "max": float(a.max()), "n": int(samples.count)}
 
 
 class RealTimeLoop:
     """Runs detection, tracking and PTZ control over a :class:`Capture` (see the module docstring).
 
-    Hooks: ``on_frame(record, frame, dets, trace, tracks, command)`` after each processed frame
-    (the demo scores there and the annotated view is drawn there), returning extra log fields;
+    Hooks: ``on_frame(record, frame, dets, z, tracks, command)`` after each processed frame, with
+    ``z`` the valid detections' floor positions (K, 2) m (the demo scores there and the annotated
+    view is drawn there), returning extra log fields;
     ``driver`` may be ``None`` (no PTZ: commands are computed and logged only).
     """
 
@@ -179,10 +218,13 @@ class RealTimeLoop:
         self.sent_at: float | None = None
         self._sent_track: int | None = None
         self._stop = threading.Event()
+        self._old_handlers: dict = {}
+        self.t_start = time.monotonic()
+        self._pending: dict[int, float] = {}  # driver sequence number -> frame available time
         self.stop_reason = "source ended"
         W, H = rig.omni.image_size
         self.shape = (H, W, 3)
-        self._theta_map = rig.omni.to_polar(*np.meshgrid(np.arange(W), np.arange(H)))[1]
+        self._theta_map = jnp.asarray(rig.omni.to_polar(*np.meshgrid(np.arange(W), np.arange(H)))[1], jnp.float32)
         self.period = 1.0 / capture.source.fps if capture.source.fps else None
 
     # -- control --------------------------------------------------------------------------
@@ -192,20 +234,30 @@ class RealTimeLoop:
         self._stop.set()
 
     def install_signal_handlers(self) -> None:
-        """Ctrl-C and SIGTERM end the loop cleanly (PTZ home, summary written)."""
+        """Ctrl-C and SIGTERM end the loop cleanly (PTZ home, summary written); see :meth:`restore_signal_handlers`."""
         for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda s, _f: self.stop(signal.Signals(s).name))
+            self._old_handlers[sig] = signal.signal(sig, lambda s, _f: self.stop(signal.Signals(s).name))
 
-    def warm_up(self) -> None:
-        """Compile the jitted stages on a frame of the right size before timing anything."""
+    def restore_signal_handlers(self) -> None:
+        """Put back the handlers :meth:`install_signal_handlers` replaced."""
+        for sig, handler in self._old_handlers.items():
+            signal.signal(sig, handler)
+        self._old_handlers.clear()
+
+    def warm_up(self):
+        """Compile the jitted stages on a frame of the right size before timing anything; returns
+        the (empty) detections of the blank frame."""
         blank = jnp.zeros(self.shape, jnp.uint8)
-        jax.block_until_ready(perceive(self.detector, self.rig, blank, self.bg, self.lines))
+        dets = perceive(self.detector, self.rig, blank, self.bg, self.lines)[0]
+        jax.block_until_ready(update_background(self.detector, self.bg, blank, self._theta_map, dets,
+                                                self.rig.detection.adapt_rate * self.cfg.adapt_every))
         jax.block_until_ready(aim_at_floor(self.rig, jnp.array([1.0, 0.5]), 0.01 * jnp.eye(2)))
+        return dets
 
     # -- the loop -------------------------------------------------------------------------
 
     def run(self) -> None:
-        t_start = time.monotonic()
+        self.t_start = t_start = time.monotonic()
         last_status = t_start
         with self.log_path.open("w") as log:
             while not self._stop.is_set():
@@ -251,11 +303,11 @@ class RealTimeLoop:
         self.counts["frames"] += 1
         t = time.monotonic()
         x = jnp.asarray(frame.image)
-        dets, trace, z, R = perceive(self.detector, self.rig, x, self.bg, self.lines)
+        dets, _, z, R = perceive(self.detector, self.rig, x, self.bg, self.lines)
         valid = np.asarray(dets.valid)
         z, R = np.asarray(z)[valid], np.asarray(R)[valid]
         t = self._record("detect", t)
-        tracks = self.tracker.step(frame.t, z, R)
+        tracks = self.tracker.step(frame.stamp, z, R)
         confirmed = self.tracker.confirmed()
         t = self._record("track", t)
         command = self._aim(frame, confirmed)
@@ -265,17 +317,21 @@ class RealTimeLoop:
         t_sent = time.monotonic()
         self._record("send", t)
         if command is not None and command.sent:
-            self.timings.latency.append(1e3 * (t_sent - frame.t))
+            self.timings.compute.append(1e3 * (t_sent - frame.t))
+            if self.driver is None:
+                self.timings.latency.append(1e3 * (t_sent - frame.t))
+            else:
+                self._pending[self.driver.sequence] = frame.t
+        self._collect_writes()
         t = t_sent
         record.update(self._describe(dets, valid, confirmed, command))
         if self.on_frame is not None:
-            record.update(self.on_frame(record, frame, dets, trace, tracks, command) or {})
+            record.update(self.on_frame(record, frame, dets, z, tracks, command) or {})
         log.write(json.dumps(record) + "\n")
         t = self._record("log", t)
         if self.counts["frames"] % self.cfg.adapt_every == 0:
-            still = ~sector_mask(self._theta_map, dets)
-            self.bg = adapt_background(self.bg, x, still, self.rig.detection.adapt_rate * self.cfg.adapt_every)
-            self.lines = line_background(self.detector, self.bg)
+            self.bg, self.lines = update_background(self.detector, self.bg, x, self._theta_map, dets,
+                                                    self.rig.detection.adapt_rate * self.cfg.adapt_every)
             jax.block_until_ready(self.lines)
         self._record("adapt", t)
         elapsed = time.monotonic() - frame.t
@@ -302,14 +358,14 @@ class RealTimeLoop:
                    d_zoom * zp.seconds_full_range)
 
     def _aim(self, frame: Frame, tracks) -> Command | None:
-        target = self.selector.choose(frame.t, tracks, self._settled())
+        target = self.selector.choose(frame.stamp, tracks, self._settled())
         if target is None:
             self.counts["no_target"] += 1
             return None
         # the head is predicted to when the PTZ gets there: slew time from the last command, refined once
         lead = 0.0
         for _ in range(2):
-            xp, Pp = target.predict(frame.t + lead, self.tracker.accel_sd)
+            xp, Pp = target.predict(frame.stamp + lead, self.tracker.accel_sd)
             aimed = aim_at_floor(self.rig, jnp.asarray(xp[:2]), jnp.asarray(Pp[:2, :2]))
             lead = self._slew_time((float(aimed.pan), float(aimed.tilt), float(aimed.zoom[1])))
         if not bool(aimed.valid):
@@ -324,7 +380,7 @@ class RealTimeLoop:
         if not send:
             self.counts["dead_zone"] += 1
         return Command(track=target.id, pan=pan, tilt=tilt, zoom=zoom, zooms=zooms, sd_pan=sd_pan,
-                       sd_tilt=sd_tilt, sent=send, t_predicted=frame.t + lead, aimed=aimed)
+                       sd_tilt=sd_tilt, sent=send, t_predicted=frame.stamp + lead, aimed=aimed)
 
     def _send(self, cmd: Command) -> None:
         if self.driver is not None:
@@ -334,10 +390,30 @@ class RealTimeLoop:
         self._sent_track = cmd.track
         self.counts["commands_sent"] += 1
 
-    def home(self) -> None:
-        """Send the PTZ home (end of run)."""
-        if self.driver is not None:
-            self.driver.set_target(*self.cfg.home)
+    def _collect_writes(self) -> None:
+        """Frame-to-wire latency of the targets the driver has written (superseded ones never are)."""
+        if self.driver is None:
+            return
+        for seq, t_write in self.driver.take_writes():
+            t_frame = self._pending.pop(seq, None)
+            if t_frame is not None:
+                self.timings.latency.append(1e3 * (t_write - t_frame))
+            for k in [k for k in self._pending if k < seq]:
+                del self._pending[k]
+
+    def home(self, wait_s: float = 2.0) -> bool:
+        """Send the PTZ home (end of run) and wait up to ``wait_s`` for the bytes to be written."""
+        if self.driver is None:
+            return True
+        self.driver.set_target(*self.cfg.home)
+        seq, deadline = self.driver.sequence, time.monotonic() + wait_s
+        self._collect_writes()
+        while time.monotonic() < deadline:
+            writes = self.driver.take_writes()
+            if any(s >= seq for s, _ in writes):
+                return True
+            time.sleep(0.02)
+        return False
 
     # -- reporting ------------------------------------------------------------------------
 
@@ -354,12 +430,13 @@ class RealTimeLoop:
                           "tilt_deg": round(math.degrees(command.tilt), 3), "zoom": round(command.zoom, 3),
                           "zooms": {k: round(v, 3) for k, v in command.zooms.items()},
                           "sd_pan_deg": round(math.degrees(command.sd_pan), 4),
-                          "sd_tilt_deg": round(math.degrees(command.sd_tilt), 4), "sent": command.sent}
+                          "sd_tilt_deg": round(math.degrees(command.sd_tilt), 4), "sent": command.sent,
+                          "t_predicted": round(command.t_predicted, 4)}
         return out
 
     def _status(self, elapsed: float) -> None:
         n = self.counts["frames"]
-        lat = self.timings.latency[-50:]
+        lat = self.timings.latency.recent(50)
         ptz = ""
         if self.sent is not None:
             ptz = f"PTZ {math.degrees(self.sent[0]):6.1f}/{math.degrees(self.sent[1]):5.1f} deg x{self.sent[2]:4.1f}"
@@ -369,7 +446,7 @@ class RealTimeLoop:
             errors = f" err {c['errors']} reconn {c['reconnects']}" + ("" if self.driver.connected else " [PTZ down]")
         sys.stderr.write(
             f"\r{n:6d} frames {n / max(elapsed, 1e-9):5.1f} fps | latency "
-            f"{np.median(lat) if lat else float('nan'):5.2f} ms | tracks {len(self.tracker.confirmed()):2d} | "
+            f"{np.median(lat) if lat.size else float('nan'):5.2f} ms | tracks {len(self.tracker.confirmed()):2d} | "
             f"{ptz}{errors} | dropped {self.capture.counts['dropped']} stale {self.capture.counts['stale']}   ")
         sys.stderr.flush()
 
@@ -387,10 +464,12 @@ class RealTimeLoop:
             "seconds": getattr(self, "elapsed", 0.0),
             "stop_reason": self.stop_reason,
             "latency_ms": Timings.stats(self.timings.latency),
+            "compute_latency_ms": Timings.stats(self.timings.compute),
             "frame_ms": Timings.stats(self.timings.frame),
             "stages_ms": {k: Timings.stats(v) for k, v in self.timings.stages.items()},
             "ptz": ptz,
-            "faults": {"broken_frames": self.counts["broken"], "wrong_size_frames": self.counts["wrong_size"],
+            "faults": {"broken_frames": self.capture.counts["broken"],
+                       "wrong_size_frames": self.capture.counts["wrong_size"],
                        "stale_frames": self.capture.counts["stale"], "dropped_frames": self.capture.counts["dropped"],
                        "deadline_overruns": self.counts["deadline_overruns"],
                        "source_ended": self.stop_reason == "source ended"},

@@ -25,14 +25,18 @@ from runtime.frames import IMAGE_SUFFIXES, SourceError
 
 @dataclass
 class Frame:
-    """A captured frame: its index in the source, the time it became available, and the image.
+    """A captured frame: its index in the source, the time it became available, the image, and its stamp.
 
-    ``image`` is ``None`` for a frame the source failed to deliver (a broken frame).
+    ``t`` is ``time.monotonic()`` when the frame became available (latency is measured from
+    it); ``stamp`` is the frame's own time in seconds (the tracker's clock): ``index / fps``
+    for files, folders and synthetic scenes, ``t`` for live devices. ``image`` is ``None``
+    for a frame the source failed to deliver (a broken frame).
     """
 
     index: int
     t: float
     image: np.ndarray | None
+    stamp: float = 0.0
 
 
 class Source(abc.ABC):
@@ -40,6 +44,8 @@ class Source(abc.ABC):
 
     fps: float | None = None
     name: str = "source"
+    #: Live sources (cameras) stamp frames with the capture clock, others with index / fps.
+    live: bool = False
 
     @abc.abstractmethod
     def frames(self) -> Iterator[np.ndarray | None]:
@@ -111,6 +117,7 @@ class DeviceSource(Source):
         fps = self._cap.get(cv2.CAP_PROP_FPS)
         self.fps = fps if fps and fps > 0 else None
         self.name, self.max_broken = f"camera {index}", max_broken
+        self.live = True
 
     def frames(self):
         broken = 0
@@ -140,10 +147,17 @@ def open_source(spec: str, fps: float | None = None) -> Source:
 
 
 class Capture:
-    """Runs a source in a thread, keeping only the latest frame (see the module docstring)."""
+    """Runs a source in a thread, keeping only the latest frame (see the module docstring).
 
-    def __init__(self, source: Source, paced: bool = True, max_age_s: float | None = None):
-        self.source, self.paced = source, paced
+    ``frames`` continues an iterator already started on ``source.frames()`` (after the
+    background was learnt from its first ``first_index`` frames)."""
+
+    def __init__(self, source: Source, paced: bool = True, max_age_s: float | None = None,
+                 frames: Iterator[np.ndarray | None] | None = None, first_index: int = 0,
+                 shape: tuple[int, ...] | None = None):
+        self.source, self.paced, self.shape = source, paced, shape
+        self._frames = source.frames() if frames is None else frames
+        self._first = first_index
         period = 1.0 / source.fps if source.fps else 0.04
         self.max_age_s = max_age_s if max_age_s is not None else 2.5 * period
         self._period = period
@@ -152,7 +166,7 @@ class Capture:
         self._taken = True
         self._done = False
         self._stop = threading.Event()
-        self.counts = {"captured": 0, "dropped": 0, "stale": 0, "broken": 0}
+        self.counts = {"captured": 0, "dropped": 0, "stale": 0, "broken": 0, "wrong_size": 0}
         self._thread = threading.Thread(target=self._run, name="capture", daemon=True)
 
     def __enter__(self) -> Capture:
@@ -178,7 +192,7 @@ class Capture:
     def _run(self) -> None:
         t_next = time.monotonic()
         try:
-            for i, img in enumerate(self.source.frames()):
+            for i, img in enumerate(self._frames, start=self._first):
                 if self._stop.is_set():
                     break
                 if self.paced and self.source.fps:
@@ -192,7 +206,13 @@ class Capture:
                             self._lock.wait(0.1)
                     if not self._taken:
                         self.counts["dropped"] += 1
-                    self._latest = Frame(i, time.monotonic(), img)
+                    if img is None:
+                        self.counts["broken"] += 1
+                    elif self.shape is not None and img.shape != self.shape:
+                        self.counts["wrong_size"] += 1
+                    now = time.monotonic()
+                    stamp = now if self.source.live or not self.source.fps else i / self.source.fps
+                    self._latest = Frame(i, now, img, stamp)
                     self._taken = False
                     self.counts["captured"] += 1
                     self._lock.notify_all()
@@ -204,8 +224,9 @@ class Capture:
     def get(self, timeout: float = 1.0) -> Frame | None:
         """The newest untaken frame (waiting up to ``timeout`` s), or ``None`` (source ended or nothing new).
 
-        Stale frames are counted and skipped; broken ones (``image is None``) are counted
-        and returned so that the loop can log them.
+        Stale frames are counted and skipped; broken ones (``image is None``) are returned so
+        that the loop can log them. Broken frames, and frames not of ``shape`` when given, are
+        counted as they arrive (also those the loop never takes).
         """
         deadline = time.monotonic() + timeout
         with self._lock:
@@ -215,7 +236,6 @@ class Capture:
                     self._taken = True
                     self._lock.notify_all()
                     if frame.image is None:
-                        self.counts["broken"] += 1
                         return frame
                     if self.paced and time.monotonic() - frame.t > self.max_age_s:
                         self.counts["stale"] += 1
@@ -227,3 +247,59 @@ class Capture:
                 if left <= 0:
                     return None
                 self._lock.wait(left)
+
+
+class SyntheticSource(Source):
+    """Frames of a synthetic world (:func:`omnijax.build_world`), rendered as they are read.
+
+    The truth of each rendered frame is kept in :attr:`truth` (frame index -> numpy
+    :class:`omnijax.Truth`) until the scorer takes it with :meth:`take_truth`.
+    """
+
+    def __init__(self, world, n_frames: int | None = None):
+        self.world = world
+        self.n_frames = world.n_frames if n_frames is None else min(n_frames, world.n_frames)
+        self.fps = float(world.scenario.fps)
+        self.name = f"synthetic scenario '{world.scenario.name}'"
+        self.truth: dict[int, object] = {}
+        self._lock = threading.Lock()
+
+    def frames(self):
+        import jax
+
+        for t in range(self.n_frames):
+            frame = jax.device_get(self.world.frame(t))
+            with self._lock:
+                self.truth[t] = frame.truth
+            yield np.asarray(frame.image)
+
+    def take_truth(self, index: int):
+        """The truth of frame ``index``, forgetting it and every earlier frame's."""
+        with self._lock:
+            truth = self.truth.get(index)
+            for k in [k for k in self.truth if k <= index]:
+                del self.truth[k]
+        return truth
+
+
+class FaultySource(Source):
+    """Wraps a source and injects the frame faults of a :class:`runtime.faults.FaultPlan`:
+    broken frames (``None``), frames of the wrong size (half size), and an early end."""
+
+    def __init__(self, source: Source, plan):
+        self.source, self.plan = source, plan
+        self.fps, self.name, self.live = source.fps, source.name, source.live
+
+    def frames(self):
+        for i, img in enumerate(self.source.frames()):
+            if self.plan.end is not None and i >= self.plan.end:
+                return
+            if i in self.plan.broken:
+                yield None
+            elif i in self.plan.wrong_size and img is not None:
+                yield np.ascontiguousarray(img[::2, ::2])
+            else:
+                yield img
+
+    def close(self):
+        self.source.close()
