@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._camera import OmniCamera
 from ._geometry import world_to_image
@@ -232,8 +232,8 @@ def _largest_box(omni: OmniCamera, xy, ok, radius, shoulder, head_z, R_h):
     return size.reshape(-1, 2).max(axis=0)
 
 
-def window_size(omni: OmniCamera, xy: np.ndarray, ok: np.ndarray, radius: float, shoulder: float,
-                head_z: float, R_h: float) -> tuple[int, int]:
+def window_size(omni: OmniCamera, xy: ArrayLike, ok: ArrayLike, radius: ArrayLike, shoulder: ArrayLike,
+                head_z: ArrayLike, R_h: ArrayLike) -> tuple[int, int]:
     """Smallest window (rows, columns) that holds the image of the largest person anywhere on the walkable floor.
 
     ``xy`` (..., 2) samples the floor, ``ok`` marks the walkable samples; 4 pixels of
