@@ -401,19 +401,14 @@ class RealTimeLoop:
             for k in [k for k in self._pending if k < seq]:
                 del self._pending[k]
 
-    def home(self, wait_s: float = 2.0) -> bool:
-        """Send the PTZ home (end of run) and wait up to ``wait_s`` for the bytes to be written."""
+    def home(self, wait_s: float = 3.0) -> bool:
+        """Send the PTZ home (end of run); whether it reported being there within ``wait_s``."""
         if self.driver is None:
             return True
         self.driver.set_target(*self.cfg.home)
-        seq, deadline = self.driver.sequence, time.monotonic() + wait_s
+        reached = self.driver.wait_reached(wait_s)
         self._collect_writes()
-        while time.monotonic() < deadline:
-            writes = self.driver.take_writes()
-            if any(s >= seq for s, _ in writes):
-                return True
-            time.sleep(0.02)
-        return False
+        return reached
 
     # -- reporting ------------------------------------------------------------------------
 

@@ -30,13 +30,18 @@ from runtime.sources import Capture, Source
 
 
 class VideoOut:
-    """An OpenCV video writer: MP4 (mp4v) where the build can, else Motion-JPEG AVI."""
+    """An OpenCV video writer: ``stem``.mp4 (mp4v) where the build can, else Motion-JPEG ``stem``.avi
+    (``replay``: only the AVI, each frame a JPEG of quality 95, for re-reading with ``omnijax run``)."""
 
-    def __init__(self, folder: Path, fps: float, size: tuple[int, int]):
+    def __init__(self, folder: Path, fps: float, size: tuple[int, int], stem: str = "annotated",
+                 replay: bool = False):
         self.writer = None
-        for name, codec in (("annotated.mp4", "mp4v"), ("annotated.avi", "MJPG")):
+        options = [(f"{stem}.avi", "MJPG")] if replay else [(f"{stem}.mp4", "mp4v"), (f"{stem}.avi", "MJPG")]
+        for name, codec in options:
             w = cv2.VideoWriter(str(folder / name), cv2.VideoWriter_fourcc(*codec), fps, size)
             if w.isOpened():
+                if replay:
+                    w.set(cv2.VIDEOWRITER_PROP_QUALITY, 95)
                 self.writer, self.name = w, name
                 break
             (folder / name).unlink(missing_ok=True)
@@ -145,12 +150,13 @@ def chain_hooks(*hooks) -> Callable:
 
 def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=None, config: LoopConfig,
                 paced: bool = True, background_frames: int | None = None, background_step: int = 1,
-                video: bool = True,
+                video: bool = True, record: bool = False,
                 title: str = "omnijax", foveal: Callable | None = None, hooks: tuple = (),
                 finish: Callable | None = None, extra: dict | None = None, screenshot_at: int | None = None) -> dict:
     """Run the loop on ``source`` and write the outputs to ``out`` (see the module docstring).
 
-    ``hooks`` are extra ``on_frame`` hooks (the demo's scorer, fault injection); ``finish(summary)``
+    ``hooks`` are extra ``on_frame`` hooks (the demo's scorer, fault injection); ``record`` writes
+    the processed omni frames as they came (``omni.avi``, to replay with ``omnijax run``); ``finish(summary)``
     may add to the summary before it is written; ``screenshot_at`` saves that processed frame's
     view as ``view.png``. Returns the summary.
     """
@@ -178,7 +184,14 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
                 cv2.imwrite(str(stage / "view.png"), cv2.cvtColor(annot.last, cv2.COLOR_RGB2BGR))
             return {}
 
-        loop.on_frame = chain_hooks(loop.on_frame, shoot)
+        recorder = VideoOut(stage, source.fps or 25.0, (W, H), "omni", replay=True) if record else None
+
+        def rec(record_, frame, *_):
+            if recorder is not None:
+                recorder.write(frame.image)
+            return {}
+
+        loop.on_frame = chain_hooks(loop.on_frame, shoot, rec)
         blank_dets = loop.warm_up()
         if video or screenshot_at is not None:
             annot.warm_up(np.zeros((H, W, 3), np.uint8), blank_dets)
@@ -190,12 +203,14 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
         finally:
             loop.restore_signal_handlers()
             homed = loop.home()
-            if writer is not None:
-                writer.close()
+            for w in (writer, recorder):
+                if w is not None:
+                    w.close()
         summary = loop.summary()
         summary.update({"source": source.name, "setup_s": setup_s, "background_frames": n_bg,
                         "background_step": background_step, "first_frame": first, "ptz_homed": homed,
-                        "outputs": {"log": "log.jsonl", **({"video": writer.name} if writer else {})}})
+                        "outputs": {"log": "log.jsonl", **({"video": writer.name} if writer else {}),
+                                    **({"record": recorder.name} if recorder else {})}})
         summary.update(extra or {})
         if finish is not None:
             finish(summary)

@@ -44,8 +44,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
     p.add_argument("--scenario", default=str(DEFAULT_SCENARIO), metavar="S",
                    help="scenario TOML, or a name in configs/scenarios (default three_people)")
-    p.add_argument("--frames", type=int, default=1200, metavar="N",
-                   help="scenario frames, background learning included (default 1200: 48 s at 25 fps)")
+    p.add_argument("--frames", type=int, default=1000, metavar="N",
+                   help="scenario frames, background learning (the first 240) included (default 1000: 40 s at 25 fps)")
     p.add_argument("--seed", type=int, metavar="K", help="world seed (default: the scenario's)")
     p.add_argument("--pace", choices=("live", "all"), default="live",
                    help="live: frames arrive at the scenario's rate, late ones are dropped (default); "
@@ -174,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
             summary = run_session(
                 rig, source, Path(args.out), driver=driver, profile=profile, config=loop_config(args),
                 paced=args.pace == "live", background_frames=30, background_step=args.background_step,
-                video=not args.no_video, title=f"OMNI 1  {sc.name}",
+                video=not args.no_video, record=args.record, title=f"OMNI 1  {sc.name}",
                 foveal=FovealInset(world, emulator, args.inset_every), hooks=(scorer, unplug), finish=finish,
                 screenshot_at=args.screenshot)
         finally:

@@ -42,7 +42,12 @@ def add_loop_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--faults", default="", metavar="SPEC",
                    help="inject faults, e.g. 'broken@300,wrong-size@350,end@900' (see --help of demo)")
     p.add_argument("--no-video", action="store_true", help="do not draw or write the annotated video")
+    p.add_argument("--record", action="store_true",
+                   help="also write the omni frames as processed to DIR/omni.avi (to replay with `omnijax run`)")
     p.add_argument("--quiet", action="store_true", help="no live status line")
+    p.add_argument("--cache-dir", metavar="DIR", default=None,
+                   help="JAX compilation cache (default: $XDG_CACHE_HOME/omnijax/xla or ~/.cache/omnijax/xla)")
+    p.add_argument("--no-cache", action="store_true", help="compile everything afresh, cache nothing")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -68,7 +73,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def check_loop_options(args) -> None:
+    """Check the shared options, and turn on the compilation cache (later starts compile less)."""
     from runtime.cli import UsageError
+    from runtime.commands.optimise import _enable_cache
 
     if args.dwell < 0:
         raise UsageError(f"--dwell: expected seconds >= 0, got {args.dwell}")
@@ -78,6 +85,7 @@ def check_loop_options(args) -> None:
         raise UsageError(f"--max-seconds: expected seconds > 0, got {args.max_seconds}")
     if args.max_frames is not None and args.max_frames < 1:
         raise UsageError(f"--max-frames: expected a positive count, got {args.max_frames}")
+    _enable_cache(args)
 
 
 def parse_faults(text: str, ptz_unplug: bool = True):
@@ -143,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
         summary = run_session(rig, source, Path(args.out), driver=driver, profile=profile, config=loop_config(args),
                               paced=pace == "live", background_frames=args.background_frames,
                               background_step=args.background_step,
-                              video=not args.no_video, title=f"OMNI  {Path(str(args.source)).name}",
+                              video=not args.no_video, record=args.record, title=f"OMNI  {Path(str(args.source)).name}",
                               extra={"config_file": str(args.config), "ptz_url": args.ptz, "pace": pace,
                                      "faults_injected": plan.describe()})
     except SourceError as exc:
