@@ -9,7 +9,8 @@ Per frame (each stage timed):
 4. ``aim``: the target chosen, its head predicted to when the PTZ will get there (tracking and
    latency uncertainty included), pan/tilt, their covariance and the zoom of both rules (jitted);
 5. ``send``: the PTZ command through the driver, unless it falls in the dead-zone;
-6. afterwards, off the latency path: the log line, the annotated frame, the background update.
+6. afterwards, off the latency path: the hooks (``draw``: the annotated frame, the demo's
+   scoring), the log line, the background update.
 
 The loop keeps going through faults (the source ends, a broken frame, a frame of the wrong
 size, the PTZ port vanishing and returning) and counts each; on Ctrl-C or SIGTERM it sends
@@ -324,9 +325,10 @@ class RealTimeLoop:
                 self._pending[self.driver.sequence] = frame.t
         self._collect_writes()
         t = t_sent
-        record.update(self._describe(dets, valid, confirmed, command))
         if self.on_frame is not None:
             record.update(self.on_frame(record, frame, dets, z, tracks, command) or {})
+        t = self._record("draw", t)
+        record.update(self._describe(dets, valid, confirmed, command))
         log.write(json.dumps(record) + "\n")
         t = self._record("log", t)
         if self.counts["frames"] % self.cfg.adapt_every == 0:
