@@ -132,6 +132,7 @@ class Command:
     sent: bool
     t_predicted: float
     aimed: Aimed | None = None
+    floor_sd: np.ndarray | None = None  # sd of the predicted floor position (X, Y), m
 
 
 @dataclass
@@ -217,6 +218,7 @@ class RealTimeLoop:
                        "no_target": 0, "invalid_geometry": 0, "deadline_overruns": 0}
         self.sent: tuple[float, float, float] | None = None
         self.sent_at: float | None = None
+        self._arrive_at = 0.0
         self._sent_track: int | None = None
         self._stop = threading.Event()
         self._old_handlers: dict = {}
@@ -345,10 +347,11 @@ class RealTimeLoop:
         """Whether the PTZ should have reached the last command by now (slew-time estimate)."""
         if self.sent_at is None or self.sent is None:
             return False
-        return time.monotonic() >= self.sent_at + self._slew_time(self.sent)
+        return time.monotonic() >= self._arrive_at
 
-    def _slew_time(self, target: tuple[float, float, float]) -> float:
-        """Seconds the PTZ needs from the last command to ``target`` (device slew rates, zoom speed)."""
+    def _slew_time(self, target: tuple[float, float, float], zoom: bool = True) -> float:
+        """Seconds the PTZ needs from the last command to ``target`` (device slew rates, and the zoom
+        speed unless ``zoom`` is false)."""
         if self.profile is None or self.sent is None:
             return 0.0
         d_pan = abs(math.degrees(math.remainder(target[0] - self.sent[0], 2 * math.pi)))
@@ -357,19 +360,22 @@ class RealTimeLoop:
         z_span = max(zp.position) - min(zp.position)
         d_zoom = abs(self.profile.zoom_position(target[2]) - self.profile.zoom_position(self.sent[2])) / z_span
         return max(d_pan / self.profile.pan.slew_deg_s(), d_tilt / self.profile.tilt.slew_deg_s(),
-                   d_zoom * zp.seconds_full_range)
+                   d_zoom * zp.seconds_full_range if zoom else 0.0)
 
     def _aim(self, frame: Frame, tracks) -> Command | None:
         target = self.selector.choose(frame.stamp, tracks, self._settled())
         if target is None:
             self.counts["no_target"] += 1
             return None
-        # the head is predicted to when the PTZ gets there: slew time from the last command, refined once
+        # the head is predicted to when the PTZ's pan and tilt get there (their slew time from the last
+        # command), refined once; the zoom keeps adjusting meanwhile and does not lengthen the horizon,
+        # which would widen the uncertainty, hence the zoom, hence the horizon
         lead = 0.0
         for _ in range(2):
-            xp, Pp = target.predict(frame.stamp + lead, self.tracker.accel_sd)
+            t_predicted = frame.stamp + lead
+            xp, Pp = target.predict(t_predicted, self.tracker.accel_sd)
             aimed = aim_at_floor(self.rig, jnp.asarray(xp[:2]), jnp.asarray(Pp[:2, :2]))
-            lead = self._slew_time((float(aimed.pan), float(aimed.tilt), float(aimed.zoom[1])))
+            lead = self._slew_time((float(aimed.pan), float(aimed.tilt), 1.0), zoom=False)
         if not bool(aimed.valid):
             self.counts["invalid_geometry"] += 1
             return None
@@ -382,11 +388,13 @@ class RealTimeLoop:
         if not send:
             self.counts["dead_zone"] += 1
         return Command(track=target.id, pan=pan, tilt=tilt, zoom=zoom, zooms=zooms, sd_pan=sd_pan,
-                       sd_tilt=sd_tilt, sent=send, t_predicted=frame.stamp + lead, aimed=aimed)
+                       sd_tilt=sd_tilt, sent=send, t_predicted=t_predicted, aimed=aimed,
+                       floor_sd=np.sqrt(np.diag(Pp)[:2]))
 
     def _send(self, cmd: Command) -> None:
         if self.driver is not None:
             self.driver.set_target(cmd.pan, cmd.tilt, cmd.zoom)
+        self._arrive_at = time.monotonic() + self._slew_time((cmd.pan, cmd.tilt, cmd.zoom))
         self.sent = (cmd.pan, cmd.tilt, cmd.zoom)
         self.sent_at = time.monotonic()
         self._sent_track = cmd.track
@@ -428,7 +436,8 @@ class RealTimeLoop:
                           "zooms": {k: round(v, 3) for k, v in command.zooms.items()},
                           "sd_pan_deg": round(math.degrees(command.sd_pan), 4),
                           "sd_tilt_deg": round(math.degrees(command.sd_tilt), 4), "sent": command.sent,
-                          "t_predicted": round(command.t_predicted, 4)}
+                          "t_predicted": round(command.t_predicted, 4),
+                          "floor_sd_m": [round(float(v), 4) for v in command.floor_sd]}
         return out
 
     def _status(self, elapsed: float) -> None:
