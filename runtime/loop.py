@@ -394,6 +394,7 @@ class RealTimeLoop:
     def _send(self, cmd: Command) -> None:
         if self.driver is not None:
             self.driver.set_target(cmd.pan, cmd.tilt, cmd.zoom)
+            time.sleep(0)  # hand the GIL to the driver's worker now, so that the bytes go out before the logging
         self._arrive_at = time.monotonic() + self._slew_time((cmd.pan, cmd.tilt, cmd.zoom))
         self.sent = (cmd.pan, cmd.tilt, cmd.zoom)
         self.sent_at = time.monotonic()

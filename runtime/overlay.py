@@ -111,7 +111,11 @@ def draw_tracks(img: np.ndarray, rig: Rig, tracks, target: int | None) -> np.nda
 
 
 def _text(img, text, org, colour=WHITE, scale=0.45, thickness=1) -> None:
-    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), thickness + 2, cv2.LINE_AA)
+    """Text on a dark box (readable over any image)."""
+    (w, h), base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, thickness)
+    x, y = org
+    box = img[max(y - h - 4, 0):y + base + 2, max(x - 4, 0):x + w + 4]
+    box[:] = (0.35 * box).astype(np.uint8)
     cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, colour, thickness, cv2.LINE_AA)
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -160,6 +161,8 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
     may add to the summary before it is written; ``screenshot_at`` saves that processed frame's
     view as ``view.png``. Returns the summary.
     """
+    # the PTZ driver's and the capture's threads get the interpreter within 1 ms (default 5 ms) of a wake-up
+    sys.setswitchinterval(0.001)
     n_bg = background_frames or rig.detection.background_frames
     W, H = rig.omni.image_size
     t0 = time.monotonic()
