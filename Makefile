@@ -8,7 +8,7 @@ OUT    ?= out
 .PHONY: demo test test-slow bench clean help
 
 help:
-	@echo "make demo       create .venv, install, run the main job on the built-in synthetic scene"
+	@echo "make demo       create .venv, install, run the whole system on a synthetic scene with an emulated PTZ"
 	@echo "make test       create .venv, install, run the test suite (what CI runs)"
 	@echo "make test-slow  the long statistical tests as well"
 	@echo "make bench      speed benchmarks, pinned to one core"
@@ -21,8 +21,8 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/omnijax validate --config configs/paper.toml --out $(OUT)/validate
-	@echo "demo outputs: $(OUT)/validate (report.json and PNG maps)"
+	$(BIN)/omnijax demo --out $(OUT)/demo
+	@echo "open $(OUT)/demo/annotated.mp4 (the operator's view) and $(OUT)/demo/summary.json (the scores)"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -m "not slow"

@@ -101,6 +101,7 @@ from ._uncertainty import (  # noqa: E402
     PointingCovariance,
     gum_second_order,
     pointing_covariance,
+    pointing_covariance_full,
     pointing_covariance_mc,
     pointing_outputs,
 )

@@ -140,6 +140,22 @@ def _analytic_one(x, sigma, profile):
 _KERNELS = {"autodiff": _autodiff_one, "analytic": _analytic_one, "second_order": _second_order_one}
 
 
+@jax.jit
+def pointing_covariance_full(x: Float[Array, "*b 9"], input_cov: Float[Array, "*b 9 9"],
+                             profile: RadialProfile) -> PointingCovariance:
+    """``autodiff`` with a full input covariance ``J Sigma_x J^T`` (e.g. a tracked foot's
+    correlated (r_f, theta_f) beside the calibration's independent sigmas)."""
+    batch = x.shape[:-1]
+    xf, cf = x.reshape(-1, 9), jnp.broadcast_to(input_cov, (*batch, 9, 9)).reshape(-1, 9, 9)
+
+    def one(xi, ci):
+        J = jax.jacfwd(pointing_outputs)(xi, profile)
+        return J @ ci @ J.T
+
+    cov = jax.vmap(one)(xf, cf)
+    return PointingCovariance(cov=cov.reshape(*batch, 4, 4), valid=pointing(xf, profile).valid.reshape(batch))
+
+
 @eqx.filter_jit
 def _covariance(x, sigma, profile, method):
     kernel = _KERNELS[method]

@@ -11,8 +11,8 @@ import importlib
 import sys
 
 #: Subcommands, in the order ``--help`` lists them; each is ``runtime.commands.<name>``.
-COMMANDS: tuple[str, ...] = ("variance", "validate", "render", "detect", "bench", "optimise", "calibrate", "ptz",
-                            "ptz-emulator")
+COMMANDS: tuple[str, ...] = ("demo", "run", "variance", "validate", "render", "detect", "bench", "optimise", "calibrate",
+                            "ptz", "ptz-emulator")
 
 DESCRIPTION = """\
 Dual-camera surveillance (Greiffenhagen et al., CVPR 2000) in JAX: an

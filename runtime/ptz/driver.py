@@ -118,6 +118,7 @@ class PtzDriver:
             ("commands", "errors", "reconnects", "acks", "completions", "timeouts", "buffer_full",
              "clamped", "superseded", "unsolicited", "garbage_bytes"), 0)
         self._latency = {"ack": deque(maxlen=_LATENCIES_KEPT), "query": deque(maxlen=_LATENCIES_KEPT)}
+        self._writes: deque[tuple[int, float]] = deque(maxlen=_LATENCIES_KEPT)
 
     # ------------------------------------------------------------------------------------
     # Public API
@@ -195,6 +196,20 @@ class PtzDriver:
     def target(self) -> DeviceTarget | None:
         """The latest target, in device units."""
         return self._target
+
+    @property
+    def sequence(self) -> int:
+        """The number of :meth:`set_target` calls so far: the latest target's sequence number."""
+        with self._cond:
+            return self._seq
+
+    def take_writes(self) -> list[tuple[int, float]]:
+        """(sequence number, ``time.monotonic()``) of each target packet written since the last call:
+        when the port accepted its bytes (for frame-to-wire latency)."""
+        with self._cond:
+            out = list(self._writes)
+            self._writes.clear()
+        return out
 
     def request_position(self) -> Future:
         """Ask the camera where it is; the future gives a :class:`PtzPosition` (or raises :class:`PtzError`)."""
@@ -424,12 +439,15 @@ class PtzDriver:
         t0 = time.perf_counter()
         try:
             conn.port.write(exchange.packet)
+            t_write = time.monotonic()
         except (serial.SerialException, OSError) as exc:
             with self._cond:
                 self._waiting = None
             raise _LinkLost(f"write failed: {exc}") from None
         with self._cond:
             self._counts["commands"] += 1
+            if seq and exchange.group not in ("init", "query"):
+                self._writes.append((seq, t_write))
         if not exchange.answered:
             with self._cond:
                 self._waiting = None

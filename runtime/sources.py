@@ -1,0 +1,305 @@
+"""Frame sources for the real-time loop, and a capture thread that keeps only the latest frame.
+
+Sources yield RGB uint8 frames; a :class:`Capture` runs one in its own thread and keeps only
+the newest frame with its time stamp (``time.monotonic()`` when it became available): the
+loop takes it when ready, frames it never took are counted as dropped, frames older than
+``max_age_s`` when taken are rejected as stale (not processed late). ``paced`` sources
+(video files, image folders and synthetic scenarios played "live") release frames at
+their frame rate like a camera; unpaced ones hand over every frame (offline processing).
+"""
+
+from __future__ import annotations
+
+import abc
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from runtime.frames import IMAGE_SUFFIXES, SourceError
+
+
+@dataclass
+class Frame:
+    """A captured frame: its index in the source, the time it became available, the image, and its stamp.
+
+    ``t`` is ``time.monotonic()`` when the frame became available (latency is measured from
+    it); ``stamp`` is the frame's own time in seconds (the tracker's clock): ``index / fps``
+    for files, folders and synthetic scenes, ``t`` for live devices. ``image`` is ``None``
+    for a frame the source failed to deliver (a broken frame).
+    """
+
+    index: int
+    t: float
+    image: np.ndarray | None
+    stamp: float = 0.0
+
+
+class Source(abc.ABC):
+    """A stream of frames. ``fps`` is the nominal rate (``None``: as fast as read)."""
+
+    fps: float | None = None
+    name: str = "source"
+    #: Live sources (cameras) stamp frames with the capture clock, others with index / fps.
+    live: bool = False
+
+    @abc.abstractmethod
+    def frames(self) -> Iterator[np.ndarray | None]:
+        """RGB uint8 frames in order; ``None`` for a frame that could not be read."""
+
+    def close(self) -> None:
+        """Release the device or file."""
+
+
+class VideoSource(Source):
+    """A video file (OpenCV); an undecodable frame is yielded as ``None`` and reading goes on."""
+
+    def __init__(self, path: str | Path, max_broken: int = 25):
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise SourceError(f"{self.path}: no such video file")
+        self._cap = cv2.VideoCapture(str(self.path))
+        if not self._cap.isOpened():
+            raise SourceError(f"{self.path}: not a video OpenCV can open")
+        fps = self._cap.get(cv2.CAP_PROP_FPS)
+        self.fps = fps if fps and np.isfinite(fps) and fps > 0 else None
+        self.name = str(self.path)
+        self.max_broken = max_broken
+
+    def frames(self):
+        broken = 0
+        total = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        n = 0
+        while True:
+            ok, img = self._cap.read()
+            n += 1
+            if ok and img is not None:
+                broken = 0
+                yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+                continue
+            if total and n < total and broken < self.max_broken:
+                broken += 1
+                yield None
+                continue
+            return
+
+    def close(self):
+        self._cap.release()
+
+
+class FolderSource(Source):
+    """A folder of images, in name order; an unreadable image is yielded as ``None``."""
+
+    def __init__(self, path: str | Path, fps: float | None = None):
+        self.path = Path(path)
+        self.files = sorted(p for p in self.path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+        if not self.files:
+            raise SourceError(f"{self.path}: no images ({', '.join(sorted(IMAGE_SUFFIXES))}) in this folder")
+        self.fps, self.name = fps, str(self.path)
+
+    def frames(self):
+        for p in self.files:
+            img = cv2.imread(str(p), cv2.IMREAD_COLOR)
+            yield None if img is None else cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+
+
+class DeviceSource(Source):
+    """A camera device by index (OpenCV); a failed grab is yielded as ``None``."""
+
+    def __init__(self, index: int, max_broken: int = 50):
+        self._cap = cv2.VideoCapture(index)
+        if not self._cap.isOpened():
+            raise SourceError(f"camera {index}: cannot open the device")
+        fps = self._cap.get(cv2.CAP_PROP_FPS)
+        self.fps = fps if fps and fps > 0 else None
+        self.name, self.max_broken = f"camera {index}", max_broken
+        self.live = True
+
+    def frames(self):
+        broken = 0
+        while broken < self.max_broken:
+            ok, img = self._cap.read()
+            if ok and img is not None:
+                broken = 0
+                yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+            else:
+                broken += 1
+                yield None
+
+    def close(self):
+        self._cap.release()
+
+
+def open_source(spec: str, fps: float | None = None) -> Source:
+    """A source from a command-line spec: a video file, an image folder, or a camera index."""
+    if spec.isdigit():
+        return DeviceSource(int(spec))
+    path = Path(spec)
+    if path.is_dir():
+        return FolderSource(path, fps)
+    if path.exists():
+        return VideoSource(path)
+    raise SourceError(f"{spec}: no such video file, image folder or camera index")
+
+
+class Capture:
+    """Runs a source in a thread, keeping only the latest frame (see the module docstring).
+
+    ``frames`` continues an iterator already started on ``source.frames()`` (after the
+    background was learnt from its first ``first_index`` frames)."""
+
+    def __init__(self, source: Source, paced: bool = True, max_age_s: float | None = None,
+                 frames: Iterator[np.ndarray | None] | None = None, first_index: int = 0,
+                 shape: tuple[int, ...] | None = None):
+        self.source, self.paced, self.shape = source, paced, shape
+        self._frames = source.frames() if frames is None else frames
+        self._first = first_index
+        period = 1.0 / source.fps if source.fps else 0.04
+        self.max_age_s = max_age_s if max_age_s is not None else 2.5 * period
+        self._period = period
+        self._lock = threading.Condition()
+        self._latest: Frame | None = None
+        self._taken = True
+        self._done = False
+        self._stop = threading.Event()
+        self.counts = {"captured": 0, "dropped": 0, "stale": 0, "broken": 0, "wrong_size": 0}
+        self._thread = threading.Thread(target=self._run, name="capture", daemon=True)
+
+    def __enter__(self) -> Capture:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def stop(self) -> None:
+        self._stop.set()
+        with self._lock:
+            self._lock.notify_all()
+        self._thread.join(timeout=5)
+        self.source.close()
+
+    @property
+    def ended(self) -> bool:
+        """The source has no more frames (and the last one was taken)."""
+        with self._lock:
+            return self._done and self._taken
+
+    def _run(self) -> None:
+        t_next = time.monotonic()
+        try:
+            for i, img in enumerate(self._frames, start=self._first):
+                if self._stop.is_set():
+                    break
+                if self.paced and self.source.fps:
+                    t_next += self._period
+                    delay = t_next - time.monotonic()
+                    if delay > 0:
+                        self._stop.wait(delay)
+                with self._lock:
+                    if not self.paced:
+                        while not self._taken and not self._stop.is_set():
+                            self._lock.wait(0.1)
+                    if not self._taken:
+                        self.counts["dropped"] += 1
+                    if img is None:
+                        self.counts["broken"] += 1
+                    elif self.shape is not None and img.shape != self.shape:
+                        self.counts["wrong_size"] += 1
+                    now = time.monotonic()
+                    stamp = now if self.source.live or not self.source.fps else i / self.source.fps
+                    self._latest = Frame(i, now, img, stamp)
+                    self._taken = False
+                    self.counts["captured"] += 1
+                    self._lock.notify_all()
+        finally:
+            with self._lock:
+                self._done = True
+                self._lock.notify_all()
+
+    def get(self, timeout: float = 1.0) -> Frame | None:
+        """The newest untaken frame (waiting up to ``timeout`` s), or ``None`` (source ended or nothing new).
+
+        Stale frames are counted and skipped; broken ones (``image is None``) are returned so
+        that the loop can log them. Broken frames, and frames not of ``shape`` when given, are
+        counted as they arrive (also those the loop never takes).
+        """
+        deadline = time.monotonic() + timeout
+        with self._lock:
+            while True:
+                if not self._taken:
+                    frame = self._latest
+                    self._taken = True
+                    self._lock.notify_all()
+                    if frame.image is None:
+                        return frame
+                    if self.paced and time.monotonic() - frame.t > self.max_age_s:
+                        self.counts["stale"] += 1
+                        continue
+                    return frame
+                if self._done:
+                    return None
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return None
+                self._lock.wait(left)
+
+
+class SyntheticSource(Source):
+    """Frames of a synthetic world (:func:`omnijax.build_world`), rendered as they are read.
+
+    The truth of each rendered frame is kept in :attr:`truth` (frame index -> numpy
+    :class:`omnijax.Truth`) until the scorer takes it with :meth:`take_truth`.
+    """
+
+    def __init__(self, world, n_frames: int | None = None):
+        self.world = world
+        self.n_frames = world.n_frames if n_frames is None else min(n_frames, world.n_frames)
+        self.fps = float(world.scenario.fps)
+        self.name = f"synthetic scenario '{world.scenario.name}'"
+        self.truth: dict[int, object] = {}
+        self._lock = threading.Lock()
+
+    def frames(self):
+        import jax
+
+        for t in range(self.n_frames):
+            frame = jax.device_get(self.world.frame(t))
+            with self._lock:
+                self.truth[t] = frame.truth
+            yield np.asarray(frame.image)
+
+    def take_truth(self, index: int):
+        """The truth of frame ``index``, forgetting it and every earlier frame's."""
+        with self._lock:
+            truth = self.truth.get(index)
+            for k in [k for k in self.truth if k <= index]:
+                del self.truth[k]
+        return truth
+
+
+class FaultySource(Source):
+    """Wraps a source and injects the frame faults of a :class:`runtime.faults.FaultPlan`:
+    broken frames (``None``), frames of the wrong size (half size), and an early end."""
+
+    def __init__(self, source: Source, plan):
+        self.source, self.plan = source, plan
+        self.fps, self.name, self.live = source.fps, source.name, source.live
+
+    def frames(self):
+        for i, img in enumerate(self.source.frames()):
+            if self.plan.end is not None and i >= self.plan.end:
+                return
+            if i in self.plan.broken:
+                yield None
+            elif i in self.plan.wrong_size and img is not None:
+                yield np.ascontiguousarray(img[::2, ::2])
+            else:
+                yield img
+
+    def close(self):
+        self.source.close()
