@@ -14,10 +14,12 @@ background d^2 chi-square with 2 degrees of freedom; eq 7's ``2 Sigma`` is N = 1
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Bool, Float, UInt8
+from jaxtyping import Array, ArrayLike, Bool, Float, Shaped, UInt8
 
 from ._chroma import chromaticity_planes
 
@@ -30,11 +32,13 @@ class Background(eqx.Module):
     sigma: Float[Array, "H W"]
 
 
+@functools.partial(jax.jit, static_argnames="pool")
 def sensor_noise(frames: UInt8[ArrayLike, "N H W 3"], floor=0.5, pool: int = 5) -> Float[Array, "H W"]:
     """Per-pixel sensor noise sigma (grey levels, pooled over the channels) from N frames.
 
     From consecutive-frame differences ``d`` (variance ``2 sigma^2``, quantisation
-    included): a robust global scale (1.4826 MAD, at least 0.5) gates out changes
+    included): a robust global scale (1.4826 MAD over every 4th row and column, at
+    least 0.5) gates out changes
     beyond 6 of it (people passing), the mean of each pixel's remaining ``d^2`` gives
     its variance, averaged over a ``pool`` x ``pool`` neighbourhood for precision and
     floored at ``floor``. Compressed video (long runs of identical values, then
@@ -42,7 +46,7 @@ def sensor_noise(frames: UInt8[ArrayLike, "N H W 3"], floor=0.5, pool: int = 5) 
     """
     f = jnp.asarray(frames, jnp.float32)
     d = f[1:] - f[:-1]
-    gate = 6.0 * jnp.maximum(1.4826 * jnp.median(jnp.abs(d)), 0.5)
+    gate = 6.0 * jnp.maximum(1.4826 * jnp.median(jnp.abs(d[:, ::4, ::4])), 0.5)
     ok = jnp.abs(d) <= gate
     var = jnp.sum(jnp.where(ok, d * d, 0.0), axis=(0, 3)) / jnp.maximum(ok.sum((0, 3)), 1) / 2.0
     kernel = jnp.ones((pool, pool), jnp.float32) / pool**2
@@ -50,6 +54,7 @@ def sensor_noise(frames: UInt8[ArrayLike, "N H W 3"], floor=0.5, pool: int = 5) 
     return jnp.sqrt(jnp.maximum(var, jnp.asarray(floor, jnp.float32) ** 2))
 
 
+@jax.jit
 def learn_background(frames: UInt8[ArrayLike, "N H W 3"], sigma=None, floor=0.5) -> Background:
     """Background from N frames: per pixel, the mean of the samples within 3 sigma of the median.
 
@@ -60,12 +65,20 @@ def learn_background(frames: UInt8[ArrayLike, "N H W 3"], sigma=None, floor=0.5)
     H, W = f.shape[1:3]
     sigma = sensor_noise(frames, floor) if sigma is None else jnp.broadcast_to(
         jnp.asarray(sigma, jnp.float32), (H, W))
-    med = jnp.median(f, axis=0)
+    med = _temporal_median(jnp.asarray(frames))
     keep = jnp.all(jnp.abs(f - med) <= 3 * sigma[..., None], axis=-1, keepdims=True)
     n = jnp.maximum(keep.sum(0), 1)
     mean = jnp.where(keep, f, 0.0).sum(0) / n
     mean = jnp.where(keep.any(0), mean, med)
     return Background(mean=mean, var_factor=1.0 / n[..., 0].astype(jnp.float32), sigma=sigma)
+
+
+def _temporal_median(frames: Shaped[Array, "N H W 3"]) -> Float[Array, "H W 3"]:
+    """Per-pixel median over the frames: sorted in their own (8-bit) type along the minor
+    axis, which XLA's CPU sort does several times faster than a float median over axis 0."""
+    n = frames.shape[0]
+    srt = jnp.sort(jnp.moveaxis(frames, 0, -1), axis=-1).astype(jnp.float32)
+    return 0.5 * (srt[..., (n - 1) // 2] + srt[..., n // 2])
 
 
 class ReferenceTerms(eqx.Module):

@@ -48,7 +48,7 @@ from omnijax._foveal import head_in_view
 from omnijax._people import draw_people, walkable
 from omnijax._scenario import Scenario, parse_scenario
 from omnijax._sensor import expose
-from omnijax._world import World, build_world, draw_true_rig, render_frame, render_noise_free
+from omnijax._world import World, build_world, draw_true_rig, render_frame
 
 #: Containment is measured at these p_contain, for both zoom rules.
 P_CONTAIN = (0.9, 0.95, 0.99)
@@ -177,7 +177,7 @@ def prepare(rig: Rig, scenario: Scenario, seed: int = 0, foot_mc_profiles: int |
     det_rig = rig if foot_mc_profiles is None else eqx.tree_at(
         lambda r: r.detection, rig, dataclasses.replace(rig.detection, foot_mc_profiles=foot_mc_profiles))
     detector = build_detector(det_rig, jax.random.key(seed))
-    linear = render_noise_free(at(world, AWAY), 0)
+    linear = at(world, AWAY).linear(0)
     sensor = scenario.sensor
     keys = jax.vmap(lambda j: jax.random.bits(jax.random.fold_in(jax.random.key(seed), j), (2,), jnp.uint32))(
         jnp.arange(n_bg) + 10_000)
@@ -248,7 +248,8 @@ def _fresh_chunk(world: World, detector: Detector, bg, lines, keys) -> Trials:
         true_rig = draw_true_rig(world.rig, k_rig)
         people = draw_people(world.rig, world.scenario, k_people)
         noise = jax.random.bits(k_noise, (2,), jnp.uint32)
-        w = eqx.tree_at(lambda w: (w.true_rig, w.people, w.noise_key), world, (true_rig, people, noise))
+        w = eqx.tree_at(lambda w: (w.scene.true_rig, w.scene.people, w.scene.noise_key), world,
+                        (true_rig, people, noise))
         frame = render_frame(w, 0)
         tr = frame.truth
         det, others, over = _observe(detector, bg, lines, frame.image, tr.theta_f[0])
@@ -298,7 +299,7 @@ def trials(bench: Bench, foot, n: int, key, fresh: bool, chunk: int = 25,
             if progress:
                 progress(m)
         return concat(parts)
-    linear = render_noise_free(world, 0)
+    linear = world.linear(0)
     tr = render_frame(world, 0).truth
     sensor = bench.scenario.sensor
     chunk = min(2 * chunk, n)
