@@ -17,9 +17,9 @@ Writes DIR/report.json and PNG maps beside it:
            ptz_pan.png, ptz_tilt.png
 
   table1   the paper's Table 1 end to end on rendered frames: a person stands
-           still at eight positions P1-P8; --trials frames each (fresh sensor
-           noise) through the detector, one fixed rig, predicted with the
-           detection sigmas only: table1.png, table1_positions.png
+           still at eight positions P1-P8; --trials frames each (a fresh person
+           and sensor noise) through the detector, one fixed rig, predicted with
+           the detection sigmas only: table1.png, table1_positions.png
   table1_full_propagation
            the same with a fresh true rig and person per trial (--fresh-trials),
            the pointing error against the full propagation
@@ -188,11 +188,11 @@ def _end_to_end(args, rig, scenario, scenario_name, counts, report, timing, stag
     with tqdm(total=n_pos * (n_fixed + n_fresh) + n_empty, desc="frames", unit="frame", leave=False) as bar:
         for k, foot in enumerate(bench.positions):
             bar.set_postfix_str(f"P{k + 1} fixed rig")
-            fixed.append(e.trials(bench, foot, n_fixed, jax.random.fold_in(key, k), False, progress=bar.update))
+            fixed.append(e.trials(bench, foot, n_fixed, jax.random.fold_in(key, k), "person", progress=bar.update))
             bar.set_postfix_str(f"P{k + 1} fresh rig")
-            fresh.append(e.trials(bench, foot, n_fresh, jax.random.fold_in(key, 100 + k), True, progress=bar.update))
+            fresh.append(e.trials(bench, foot, n_fresh, jax.random.fold_in(key, 100 + k), "rig", progress=bar.update))
         bar.set_postfix_str("empty frames")
-        empty = e.trials(bench, e.AWAY, n_empty, jax.random.fold_in(key, 999), False, progress=bar.update)
+        empty = e.trials(bench, e.AWAY, n_empty, jax.random.fold_in(key, 999), "noise", progress=bar.update)
     timing["frames_s"] = time.perf_counter() - t
     timing["frames"] = n_pos * (n_fixed + n_fresh) + n_empty
     t = time.perf_counter()
