@@ -76,8 +76,10 @@ class FootSigmaTable(eqx.Module):
 
 
 def build_foot_sigma_table(polar: PolarIndex, key: PRNGKeyArray, n_profiles: int, dof_per_sample: int = 2,
-                           sigma_H_p=0.0, n_index: int = 16, contrasts=(0.25, 0.5, 1, 2, 4, 8, 16, 64)) -> FootSigmaTable:
-    """Tabulate :func:`foot_sigma_mc` over the valid hypotheses and a range of contrasts."""
+                           sigma_H_p=0.0, n_index: int = 16,
+                           contrasts=(0.25, 0.5, 1, 2, 4, 8, 16, 64, 256, 1024, 4096)) -> FootSigmaTable:
+    """Tabulate :func:`foot_sigma_mc` over the valid hypotheses and a range of contrasts (rendered
+    and real people reach contrasts in the thousands; the lookup clamps beyond the last)."""
     valid = jnp.nonzero(polar.hyp_ok)[0]
     grid = jnp.round(jnp.linspace(valid[0], valid[-1], n_index)).astype(jnp.int32)
     c = jnp.asarray(contrasts, jnp.float64)

@@ -63,10 +63,11 @@ def report_markdown(report: dict) -> str:
                 f"`ptz_{q}.png` shows var({q.replace('_', ' ')}) by the four methods over the floor and where "
                 "each departs from Monte Carlo.", ""]
     t = report["table1_summary"]
-    out += ["## Table 1: one fixed rig, detection only (the paper's experiment)", "",
+    out += ["## Table 1: one fixed rig (the paper's experiment)", "",
             f"A person stands still at eight positions ({t['scenario']}); each trial is a rendered omni frame "
-            "with fresh sensor noise, run through the detector; the prediction is the mean over trials of the "
-            "pointing covariance with the detector's sigma_r_f and sigma_theta_f only. Ratios are "
+            "of a fresh person (height, head, clothing from the priors) with fresh sensor noise, run through "
+            "the detector; the prediction is the mean over trials of the pointing covariance with the "
+            "detector's sigma_r_f and sigma_theta_f and the person priors, calibration sigmas zero. Ratios are "
             "predicted / empirical +- one sampling error (the empirical variance's standard error).", "",
             "![positions](table1_positions.png)", "",
             "`table1_positions.png` shows where the eight positions lie relative to the omni axis and the PTZ.", ""]

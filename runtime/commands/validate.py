@@ -19,7 +19,7 @@ Writes DIR/report.json and PNG maps beside it:
   table1   the paper's Table 1 end to end on rendered frames: a person stands
            still at eight positions P1-P8; --trials frames each (a fresh person
            and sensor noise) through the detector, one fixed rig, predicted with
-           the detection sigmas only: table1.png, table1_positions.png
+           the detection sigmas and the person priors (no calibration sigmas): table1.png, table1_positions.png
   table1_full_propagation
            the same with a fresh true rig and person per trial (--fresh-trials),
            the pointing error against the full propagation
@@ -213,6 +213,6 @@ def _end_to_end(args, rig, scenario, scenario_name, counts, report, timing, stag
                                         "foveal frame at the zoom the rule chose; curve: every rule and p_contain"}
     timing["statistics_s"] = time.perf_counter() - t
     positions_figure(rig, np.asarray(bench.positions), stage / "table1_positions.png")
-    table1_figure({"fixed rig, detection sigmas only": report["table1"],
+    table1_figure({"fixed rig: detection and person sigmas": report["table1"],
                    "fresh rig per trial, full propagation": report["table1_full_propagation"]}, stage / "table1.png")
     containment_figure(curve, stage / "containment.png")
