@@ -24,6 +24,8 @@ from typing import Annotated, Literal
 import numpy as np
 import pydantic
 from annotated_types import Len
+
+from omnijax._config import _one_line
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 #: Where the shipped profiles live (``configs/devices`` of the checkout).
@@ -266,19 +268,6 @@ class DeviceProfile(_Section):
         """Slew rate of ``axis`` in device units per second (at VISCA speed code ``speed``)."""
         sec = getattr(self, axis)
         return sec.slew_deg_s(speed) * sec.units_per_deg
-
-
-def _one_line(exc: pydantic.ValidationError, source: str) -> str:
-    err = exc.errors()[0]
-    loc = ".".join(str(p) for p in err["loc"])
-    msg = err["msg"].removeprefix("Value error, ")
-    if err["type"] == "missing":
-        msg = "missing key"
-    elif err["type"] == "extra_forbidden":
-        msg = "unknown key"
-    value = err.get("input")
-    shown = err["type"] not in ("missing", "extra_forbidden", "value_error") and not isinstance(value, dict)
-    return f"{source}: {loc or '(top level)'}: {msg}" + (f" (got {value!r})" if shown else "")
 
 
 def parse_profile(mapping: dict, source: str = "<profile>") -> DeviceProfile:
