@@ -24,9 +24,9 @@ from typing import Annotated, Literal
 import numpy as np
 import pydantic
 from annotated_types import Len
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from omnijax._config import _one_line
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 #: Where the shipped profiles live (``configs/devices`` of the checkout).
 DEVICES_DIR = Path(__file__).resolve().parents[2] / "configs" / "devices"
