@@ -36,7 +36,7 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=600, help="frames of the recorded clip (600)")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT))
-    from runtime.emulated_ptz import EmulatorProcess
+    from runtime.ptz.child import EmulatorProcess
 
     with tempfile.TemporaryDirectory(prefix="bench-loop-") as tmp:
         tmp = Path(tmp)

@@ -31,11 +31,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
 
 import numpy as np  # noqa: E402
-import ptz_fuzz  # noqa: E402
 
+from tests.runtime.ptz import fuzz as ptz_fuzz  # noqa: E402
 from runtime.ptz import PtzDriver, default_profile, parse_profile  # noqa: E402
 from runtime.ptz.profile import DEFAULT_PROFILES, DEVICES_DIR  # noqa: E402
 

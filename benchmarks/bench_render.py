@@ -24,16 +24,17 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from runtime.benchmarking import pin_to_one_core, time_calls  # noqa: E402
+from runtime.bench.timing import pin_to_one_core, time_calls
 
 pin_to_one_core()
 
 import equinox as eqx  # noqa: E402
 import jax  # noqa: E402
+jax.config.update("jax_enable_x64", True)  # as the omnijax command runs
 import numpy as np  # noqa: E402
 
-from omnijax import build_world  # noqa: E402
-from runtime.config_io import load_scenario  # noqa: E402
+from omnijax.world import build_world
+from runtime.files import load_scenario
 
 SCENARIOS = ROOT / "configs" / "scenarios"
 

@@ -14,15 +14,16 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from runtime.benchmarking import pin_to_one_core, time_calls  # noqa: E402
+from runtime.bench.timing import pin_to_one_core, time_calls
 
 pin_to_one_core()
 
 import jax  # noqa: E402
+jax.config.update("jax_enable_x64", True)  # as the omnijax command runs
 import numpy as np  # noqa: E402
 
-from omnijax import pointing_covariance, world_to_image  # noqa: E402
-from runtime.config_io import load_rig  # noqa: E402
+from omnijax import pointing_covariance, world_to_image
+from runtime.files import load_rig
 
 
 def numpy_first_order(x: np.ndarray, s: np.ndarray) -> np.ndarray:

@@ -23,16 +23,24 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import jax  # noqa: E402
+jax.config.update("jax_enable_x64", True)  # as the omnijax command runs
 import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from omnijax import (  # noqa: E402
-    adapt_background, build_detector, build_world, change_image, detect, learn_background, line_background,
-    polar_range, sector_mask,
+from omnijax import (
+    adapt_background,
+    build_detector,
+    change_image,
+    detect,
+    learn_background,
+    line_background,
+    polar_range,
+    sector_mask,
 )
-from omnijax import parse_scenario  # noqa: E402
-from runtime.config_io import load_rig, load_scenario, read_toml  # noqa: E402
+from omnijax.world import build_world
+from omnijax.world import parse_scenario
+from runtime.files import load_rig, load_scenario, read_toml
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "configs" / "scenarios"
 

@@ -25,10 +25,12 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import jax  # noqa: E402
+jax.config.update("jax_enable_x64", True)  # as the omnijax command runs
 import numpy as np  # noqa: E402
 
-from omnijax import build_world, effective_sigma, omni_rays, world_to_image  # noqa: E402
-from runtime.config_io import load_scenario  # noqa: E402
+from omnijax import world_to_image
+from omnijax.world import build_world, effective_sigma, omni_rays
+from runtime.files import load_scenario
 
 SCENARIOS = ROOT / "configs" / "scenarios"
 

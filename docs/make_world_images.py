@@ -14,11 +14,14 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import cv2  # noqa: E402
+import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from omnijax import build_world, render_foveal  # noqa: E402
-from runtime.config_io import load_scenario  # noqa: E402
-from runtime.synthetic import truth_line, true_aim  # noqa: E402
+jax.config.update("jax_enable_x64", True)  # as the omnijax command runs
+
+from omnijax.world import build_world, render_foveal
+from runtime.files import load_scenario
+from runtime.validation.truth import truth_line, true_aim
 
 OUT = ROOT / "docs" / "world"
 SCENARIOS = ROOT / "configs" / "scenarios"

@@ -1,137 +1,138 @@
-"""omnijax: jitted JAX kernels of the dual-camera surveillance system (Greiffenhagen et al., CVPR 2000).
+"""omnijax: the jitted JAX kernels of the dual-camera surveillance system (Greiffenhagen et al., CVPR 2000).
 
-Pure functions of arrays and config PyTrees: camera models, chromaticity, the
-pointing geometry, its uncertainty, the zoom, calibration (rim fit, rig fit), change
-detection, and the synthetic world that renders omni and foveal frames with ground
-truth. ``optimise`` and ``runtime``
-import this package, never the reverse.
+Pure functions of arrays and config PyTrees, one concept per subpackage:
 
-Importing omnijax enables JAX's float64 (geometry, uncertainty and Monte Carlo
-compare at 1e-9); per-pixel kernels ask for float32 explicitly.
+- ``omnijax.config``: the rig's TOML schema and the :class:`Rig` PyTree every kernel takes;
+- ``omnijax.camera``: omnidirectional camera models (paraboloid, fisheyes, OCamCalib), r <-> phi;
+- ``omnijax.geometry``: eq 1-4, image radius -> floor -> pan/tilt, and floor <-> image conversions;
+- ``omnijax.detection``: chromaticity, change measure, background, polar indexing, the foot (eq 5-12);
+- ``omnijax.uncertainty``: the pointing covariance by four methods (eq 13-14, GUM);
+- ``omnijax.zoom``: eq 15 and the calibrated zoom rule;
+- ``omnijax.aim``: the one aim pipeline, from detections to pan/tilt/zoom;
+- ``omnijax.calibration``: the rim fit and the rig fit;
+- ``omnijax.world``: the synthetic world (ground truth), imported by nothing else in ``omnijax``.
+
+``optimise`` and ``runtime`` import this package, never the reverse.
+
+Precision: geometry, uncertainty and Monte Carlo are meant to run in float64 (the tests compare at
+1e-9); per-pixel kernels ask for float32 explicitly. Importing omnijax does not change JAX's global
+configuration: the ``omnijax`` command, the benchmarks and the tests switch float64 on at their
+start (``jax.config.update("jax_enable_x64", True)``); a program of your own should too
+(docs/design.md, "Precision").
 """
 
-import jax as _jax
-
-_jax.config.update("jax_enable_x64", True)
-
-from ._aim import Aim, aim, aim_with_covariance  # noqa: E402
-from ._calibration import (  # noqa: E402
-    GLOBAL_NAMES,
-    PARAM_NAMES,
-    PARAM_UNITS,
-    RIM_NAMES,
-    CalibrationProblem,
-    Observations,
-    RigFit,
-    RimPrior,
-    SimulationSettings,
-    draw_calibration_truth,
-    fit_rig,
-    simulate_calibration,
-    with_mounting_sigma,
+from .config import (
+    ConfigError as ConfigError,
+    Detection as Detection,
+    Foveal as Foveal,
+    INPUT_NAMES as INPUT_NAMES,
+    INPUT_UNITS as INPUT_UNITS,
+    LAYOUT_NAMES as LAYOUT_NAMES,
+    LayoutSearch as LayoutSearch,
+    Lens as Lens,
+    Person as Person,
+    Rig as Rig,
+    Room as Room,
+    Sigmas as Sigmas,
+    parse_rig as parse_rig,
 )
-from ._camera import (  # noqa: E402
-    PROFILES,
-    Equidistant,
-    Equisolid,
-    OCamCalib,
-    OCamCalibFile,
-    OmniCamera,
-    Paraboloid,
-    RadialProfile,
-    parse_ocamcalib,
+from .camera import (
+    Equidistant as Equidistant,
+    Equisolid as Equisolid,
+    OCamCalib as OCamCalib,
+    OCamCalibFile as OCamCalibFile,
+    OmniCamera as OmniCamera,
+    PROFILES as PROFILES,
+    Paraboloid as Paraboloid,
+    RadialProfile as RadialProfile,
+    parse_ocamcalib as parse_ocamcalib,
 )
-from ._change import (  # noqa: E402
-    MEASURES,
-    Background,
-    adapt_background,
-    change_image,
-    change_measure,
-    grey_change_measure,
-    learn_background,
-    sensor_noise,
+from .geometry import (
+    D_P_MIN as D_P_MIN,
+    PHI_FLOOR_MAX as PHI_FLOOR_MAX,
+    Pointing as Pointing,
+    floor_radius as floor_radius,
+    foveal_offsets as foveal_offsets,
+    head_image_radius as head_image_radius,
+    image_to_floor as image_to_floor,
+    person_image_extent as person_image_extent,
+    point_image_radius as point_image_radius,
+    pointing as pointing,
+    world_to_image as world_to_image,
 )
-from ._chroma import chromaticity, chromaticity_covariance  # noqa: E402
-from ._config import (  # noqa: E402
-    INPUT_NAMES,
-    INPUT_UNITS,
-    LAYOUT_NAMES,
-    ConfigError,
-    Detection,
-    Foveal,
-    LayoutSearch,
-    Lens,
-    Person,
-    Rig,
-    Room,
-    Sigmas,
-    parse_rig,
+from .detection import (
+    Background as Background,
+    DetectionTrace as DetectionTrace,
+    Detections as Detections,
+    Detector as Detector,
+    FootSigmaTable as FootSigmaTable,
+    LineBackground as LineBackground,
+    MEASURES as MEASURES,
+    PolarIndex as PolarIndex,
+    Sectors as Sectors,
+    Thresholds as Thresholds,
+    adapt_background as adapt_background,
+    build_detector as build_detector,
+    build_polar_index as build_polar_index,
+    change_image as change_image,
+    change_measure as change_measure,
+    chromaticity as chromaticity,
+    chromaticity_covariance as chromaticity_covariance,
+    detect as detect,
+    foot_estimate as foot_estimate,
+    foot_scores as foot_scores,
+    foot_sigma_mc as foot_sigma_mc,
+    grey_change_measure as grey_change_measure,
+    hysteresis_sectors as hysteresis_sectors,
+    learn_background as learn_background,
+    line_background as line_background,
+    polar_range as polar_range,
+    sector_mask as sector_mask,
+    sensor_noise as sensor_noise,
+    window_profile as window_profile,
 )
-from ._detector import (  # noqa: E402
-    DetectionTrace,
-    Detections,
-    Detector,
-    LineBackground,
-    build_detector,
-    detect,
-    line_background,
-    sector_mask,
+from .uncertainty import (
+    METHODS as METHODS,
+    MonteCarloCovariance as MonteCarloCovariance,
+    OUTPUT_NAMES as OUTPUT_NAMES,
+    PointingCovariance as PointingCovariance,
+    gum_second_order as gum_second_order,
+    pointing_covariance as pointing_covariance,
+    pointing_covariance_full as pointing_covariance_full,
+    pointing_covariance_mc as pointing_covariance_mc,
+    pointing_outputs as pointing_outputs,
 )
-from ._foot import FootSigmaTable, foot_estimate, foot_scores, foot_sigma_mc  # noqa: E402
-from ._geometry import (  # noqa: E402
-    D_P_MIN,
-    PHI_FLOOR_MAX,
-    Pointing,
-    floor_radius,
-    foveal_offsets,
-    head_image_radius,
-    image_to_floor,
-    person_image_extent,
-    world_to_image,
-    point_image_radius,
-    pointing,
+from .zoom import (
+    ZoomChoice as ZoomChoice,
+    choose_zoom as choose_zoom,
+    containment_probability as containment_probability,
+    face_pixels as face_pixels,
+    head_half_size as head_half_size,
+    paper_fov as paper_fov,
+    rectangle_probability as rectangle_probability,
 )
-from ._indexing import Sectors, Thresholds, hysteresis_sectors, window_profile  # noqa: E402
-from ._polar import PolarIndex, build_polar_index, polar_range  # noqa: E402
-from ._rim import RimEdges, RimFit, fit_circle, fit_rim, rim_edges  # noqa: E402
-from ._uncertainty import (  # noqa: E402
-    METHODS,
-    OUTPUT_NAMES,
-    MonteCarloCovariance,
-    PointingCovariance,
-    gum_second_order,
-    pointing_covariance,
-    pointing_covariance_full,
-    pointing_covariance_mc,
-    pointing_outputs,
+from .aim import (
+    Aim as Aim,
+    aim as aim,
+    aim_with_covariance as aim_with_covariance,
 )
-from ._foveal import HeadView, PTZView, foveal_head, head_in_view, ptz_view, render_foveal  # noqa: E402
-from ._jpeg import jpeg  # noqa: E402
-from ._noise import gaussian, key_from_seed  # noqa: E402
-from ._people import People, Paths, draw_people, walk, walkable  # noqa: E402
-from ._render import OmniBackground, omni_rays  # noqa: E402
-from ._scenario import Scenario, parse_scenario, read_scenario_header  # noqa: E402
-from ._sensor import effective_sigma, expose, quantise  # noqa: E402
-from ._world import (  # noqa: E402
-    Frame,
-    FrameState,
-    Scene,
-    Truth,
-    World,
-    build_world,
-    draw_true_rig,
-    render_frame,
-    render_frames,
-    render_state,
+from .calibration import (
+    CalibrationProblem as CalibrationProblem,
+    GLOBAL_NAMES as GLOBAL_NAMES,
+    Observations as Observations,
+    PARAM_NAMES as PARAM_NAMES,
+    PARAM_UNITS as PARAM_UNITS,
+    RIM_NAMES as RIM_NAMES,
+    RigFit as RigFit,
+    RimEdges as RimEdges,
+    RimFit as RimFit,
+    RimPrior as RimPrior,
+    SimulationSettings as SimulationSettings,
+    draw_calibration_truth as draw_calibration_truth,
+    fit_circle as fit_circle,
+    fit_rig as fit_rig,
+    fit_rim as fit_rim,
+    rim_edges as rim_edges,
+    simulate_calibration as simulate_calibration,
+    with_mounting_sigma as with_mounting_sigma,
 )
-from ._zoom import (  # noqa: E402
-    ZoomChoice,
-    choose_zoom,
-    containment_probability,
-    face_pixels,
-    head_half_size,
-    paper_fov,
-    rectangle_probability,
-)
-
-__all__ = [n for n in dir() if not n.startswith("_")]

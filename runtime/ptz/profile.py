@@ -26,7 +26,7 @@ import pydantic
 from annotated_types import Len
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from omnijax._config import _one_line
+from omnijax.config._config import _one_line
 
 #: Where the shipped profiles live (``configs/devices`` of the checkout).
 DEVICES_DIR = Path(__file__).resolve().parents[2] / "configs" / "devices"

@@ -1,0 +1,560 @@
+"""Typed rig configuration: a TOML schema (validated once, at the edge) and the PyTrees kernels take.
+
+The schema (:class:`RigFile` and its sections) mirrors the TOML file key for key,
+with units in the key names where they are not SI (``theta_c_deg``). Pydantic
+checks types, ranges and unknown keys; :func:`parse_rig` turns a validated mapping
+into :class:`Rig`, an immutable ``equinox.Module`` whose numbers are arrays (so a
+new ``D_c`` does not recompile) and whose modes and sizes are static fields.
+
+Every failure is a :class:`ConfigError` with one line naming the key and what was
+expected.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from typing import Annotated, Any, Literal
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pydantic
+from annotated_types import Len
+from jaxtyping import Array, Float
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from ..camera import OCamCalib, OmniCamera, PROFILES, parse_ocamcalib
+
+# --------------------------------------------------------------------------------------
+# Kernel-side types
+# --------------------------------------------------------------------------------------
+
+#: Order of the uncertain inputs of the pointing geometry (DESIGN.md section 4, eq 13-14).
+INPUT_NAMES: tuple[str, ...] = ("r_f", "theta_f", "H_o", "H_f", "D_c", "theta_c", "r_m", "H_p", "R_h")
+#: Units of the inputs, as echoed in reports.
+INPUT_UNITS: dict[str, str] = {
+    "r_f": "px", "theta_f": "rad", "H_o": "m", "H_f": "m", "D_c": "m",
+    "theta_c": "rad", "r_m": "px", "H_p": "m", "R_h": "m",
+}
+
+
+class ConfigError(ValueError):
+    """A rig or scenario file that does not describe a usable set-up (one-line message)."""
+
+
+class Lens(eqx.Module):
+    """The PTZ lens: horizontal angle of view at tabulated zoom factors, and the sensor's size.
+
+    Between table entries ``log tan(fov_h / 2)`` is interpolated linearly in
+    ``log zoom`` (exact for an ideal zoom lens, where ``tan(fov / 2)`` is ``1 / zoom``).
+    """
+
+    zoom: Float[Array, " k"]
+    fov_h: Float[Array, " k"]
+    zoom_range: Float[Array, "2"]
+    image_size: tuple[int, int] = eqx.field(static=True)
+
+    @property
+    def aspect(self) -> float:
+        """Height over width of the foveal image."""
+        return self.image_size[1] / self.image_size[0]
+
+    def fov(self, zoom) -> tuple[Array, Array]:
+        """Horizontal and vertical angle of view (rad) at ``zoom`` (within the table)."""
+        t = jnp.exp(jnp.interp(jnp.log(zoom), jnp.log(self.zoom), jnp.log(jnp.tan(0.5 * self.fov_h))))
+        return 2.0 * jnp.arctan(t), 2.0 * jnp.arctan(t * self.aspect)
+
+    def zoom_for_tan_half_fov_h(self, t) -> Array:
+        """Zoom factor whose ``tan(fov_h / 2)`` is ``t`` (table ends beyond the table)."""
+        log_t = jnp.log(jnp.tan(0.5 * self.fov_h))
+        return jnp.exp(jnp.interp(-jnp.log(t), -log_t, jnp.log(self.zoom)))
+
+    def clamp(self, zoom) -> Array:
+        """``zoom`` clamped to the device's zoom range."""
+        return jnp.clip(zoom, self.zoom_range[0], self.zoom_range[1])
+
+
+class Foveal(eqx.Module):
+    """The pan-tilt-zoom camera: placement (``D_c``, ``theta_c``, ``H_f``), limits and lens."""
+
+    D_c: Float[Array, ""]
+    theta_c: Float[Array, ""]
+    H_f: Float[Array, ""]
+    pan_limits: Float[Array, "2"]
+    tilt_limits: Float[Array, "2"]
+    lens: Lens
+
+
+class Person(eqx.Module):
+    """Person priors: height ``H_p``, head radius ``R_h``, shoulder width (all metres)."""
+
+    H_p: Float[Array, ""]
+    R_h: Float[Array, ""]
+    shoulder_width: Float[Array, ""]
+
+
+class Sigmas(eqx.Module):
+    """Standard deviations of the rig's calibration and of the person priors (SI, px for ``r_m``)."""
+
+    H_o: Float[Array, ""]
+    H_f: Float[Array, ""]
+    D_c: Float[Array, ""]
+    theta_c: Float[Array, ""]
+    r_m: Float[Array, ""]
+    H_p: Float[Array, ""]
+    R_h: Float[Array, ""]
+
+
+class Detection(eqx.Module):
+    """Detection settings: sensor noise, rates, contrast, polar sampling and the default sigmas.
+
+    ``c_min`` is the smallest per-pixel non-centrality (the Mahalanobis contrast of
+    a person's chromaticity against the background) for which ``x_m`` must hold.
+    ``r_min``/``r_max`` bound the polar sampling (px); ``None`` derives them from the
+    room. Sizes and counts are static: changing them recompiles.
+    """
+
+    sensor_sigma: Float[Array, ""]
+    x_f: Float[Array, ""]
+    x_m: Float[Array, ""]
+    sigma_r_f: Float[Array, ""]
+    sigma_theta_f: Float[Array, ""]
+    c_min: Float[Array, ""]
+    adapt_rate: Float[Array, ""]
+    min_floor_radius: Float[Array, ""]
+    n_theta: int = eqx.field(static=True)
+    max_people: int = eqx.field(static=True)
+    background_frames: int = eqx.field(static=True)
+    foot_mc_profiles: int = eqx.field(static=True)
+    r_max: float | None = eqx.field(static=True, default=None)
+
+
+class Room(eqx.Module):
+    """Floor region: outline polygon and excluded zones (metres, world frame)."""
+
+    outline: Float[Array, "n 2"]
+    exclude: tuple[Float[Array, "m 2"], ...]
+
+    def contains(self, X, Y) -> Array:
+        """Whether floor points (X, Y) lie inside the outline and outside every excluded zone."""
+        inside = _in_polygon(self.outline, X, Y)
+        for zone in self.exclude:
+            inside = inside & ~_in_polygon(zone, X, Y)
+        return inside
+
+
+def _in_polygon(poly: Float[Array, "n 2"], X, Y) -> Array:
+    """Even-odd rule: a horizontal ray from (X, Y) crosses the polygon's edges an odd number of times."""
+    X, Y = jnp.asarray(X)[..., None], jnp.asarray(Y)[..., None]
+    x0, y0 = poly[:, 0], poly[:, 1]
+    x1, y1 = jnp.roll(x0, -1), jnp.roll(y0, -1)
+    straddles = (y0 > Y) != (y1 > Y)
+    dy = jnp.where(straddles, y1 - y0, 1.0)
+    x_cross = x0 + (Y - y0) * (x1 - x0) / dy
+    return (jnp.sum(straddles & (X < x_cross), axis=-1) % 2) == 1
+
+
+#: The PTZ placement variables a layout search may vary (``theta_c`` in rad inside, ``_deg`` in files).
+LAYOUT_NAMES: tuple[str, ...] = ("D_c", "H_f", "theta_c", "H_o")
+
+
+class LayoutSearch(eqx.Module):
+    """What a layout search varies and optimises (the optional ``[layout]`` section).
+
+    ``lower`` and ``upper`` bound the variables of :data:`LAYOUT_NAMES` (m, rad; only
+    the varied ones are used); ``theta_c``'s box is periodic when it spans the
+    full circle. ``grid_step`` (m) spaces the floor grid the objectives average
+    over; floor points within ``near_radius`` (m) of the PTZ's foot are left out
+    of them; ``face_target_px`` outlines the operational region on the maps.
+    ``landscape`` is the number of grid values per varied variable of the global check.
+    """
+
+    vary: tuple[str, ...] = eqx.field(static=True)
+    lower: Float[Array, "4"]
+    upper: Float[Array, "4"]
+    objective: Literal["face_px", "variance"] = eqx.field(static=True)
+    statistic: Literal["mean", "worst"] = eqx.field(static=True)
+    grid_step: float = eqx.field(static=True)
+    near_radius: Float[Array, ""]
+    face_target_px: Float[Array, ""]
+    starts: int = eqx.field(static=True)
+    landscape: int = eqx.field(static=True)
+
+
+class Rig(eqx.Module):
+    """A whole dual-camera set-up: what every kernel of omnijax takes."""
+
+    omni: OmniCamera
+    foveal: Foveal
+    person: Person
+    sigmas: Sigmas
+    detection: Detection
+    room: Room
+    p_contain: Float[Array, ""]
+    layout: LayoutSearch
+    zoom_rule: Literal["paper", "calibrated"] = eqx.field(static=True)
+
+    def input_mean(self, r_f, theta_f) -> Float[Array, "*b 9"]:
+        """The input vector x of the pointing geometry, in :data:`INPUT_NAMES` order.
+
+        ``r_f`` (px) and ``theta_f`` (rad) may be arrays of one shape; the rig's
+        values broadcast to it.
+        """
+        r_f, theta_f = jnp.broadcast_arrays(jnp.asarray(r_f, float), jnp.asarray(theta_f, float))
+        rig = (self.omni.H_o, self.foveal.H_f, self.foveal.D_c, self.foveal.theta_c,
+               self.omni.r_m, self.person.H_p, self.person.R_h)
+        parts = [r_f, theta_f] + [jnp.broadcast_to(v, r_f.shape) for v in rig]
+        return jnp.stack(parts, axis=-1)
+
+    def input_sigma(self, sigma_r_f=None, sigma_theta_f=None) -> Float[Array, "*b 9"]:
+        """Standard deviations of x; the detection's defaults unless given (may be arrays)."""
+        s_r = self.detection.sigma_r_f if sigma_r_f is None else sigma_r_f
+        s_t = self.detection.sigma_theta_f if sigma_theta_f is None else sigma_theta_f
+        s_r, s_t = jnp.broadcast_arrays(jnp.asarray(s_r, float), jnp.asarray(s_t, float))
+        s = self.sigmas
+        rig = (s.H_o, s.H_f, s.D_c, s.theta_c, s.r_m, s.H_p, s.R_h)
+        return jnp.stack([s_r, s_t] + [jnp.broadcast_to(v, s_r.shape) for v in rig], axis=-1)
+
+
+# --------------------------------------------------------------------------------------
+# TOML schema
+# --------------------------------------------------------------------------------------
+
+Pos = Annotated[float, Field(gt=0)]
+NonNeg = Annotated[float, Field(ge=0)]
+Prob = Annotated[float, Field(gt=0, lt=1)]
+Pair = Annotated[list[float], Len(2, 2)]
+PosPair = Annotated[list[Annotated[float, Field(gt=0)]], Len(2, 2)]
+Size = Annotated[list[Annotated[int, Field(gt=0)]], Len(2, 2)]
+Point = Annotated[list[float], Len(2, 2)]
+Polygon = Annotated[list[Point], Len(3)]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+
+class OmniSection(_Section):
+    model: Literal["paraboloid", "equidistant", "equisolid", "ocamcalib"]
+    H_o: Pos = Field(description="height of the mirror focus / lens centre above the floor, m")
+    sigma_H_o: NonNeg
+    image_size: Size | None = Field(None, description="width, height in px (ocamcalib: from the file)")
+    center: Pair | None = Field(None, description="image centre x_c, y_c in px (ocamcalib: from the file)")
+    r_m: Pos | None = Field(None, description="horizon radius (phi = 90 deg) in px (ocamcalib: from the file)")
+    sigma_r_m: NonNeg = 0.0
+    rim: Pos | None = Field(None, description="radius of the usable image circle, px")
+    fov_deg: Annotated[float, Field(gt=0, le=360)] | None = Field(
+        None, description="fisheye field of view; sets the rim when `rim` is absent"
+    )
+    calib_file: str | None = Field(None, description="ocamcalib: path of calib_results.txt")
+
+    @model_validator(mode="after")
+    def _model_keys(self):
+        if self.model == "ocamcalib":
+            if self.calib_file is None:
+                raise ValueError("calib_file is required for model = 'ocamcalib'")
+        else:
+            for key in ("image_size", "center", "r_m"):
+                if getattr(self, key) is None:
+                    raise ValueError(f"{key} is required for model = '{self.model}'")
+            if self.calib_file is not None:
+                raise ValueError("calib_file is only for model = 'ocamcalib'")
+        return self
+
+
+class LensSection(_Section):
+    zoom: Annotated[list[Annotated[float, Field(ge=1)]], Len(2)]
+    fov_h_deg: Annotated[list[Annotated[float, Field(gt=0, lt=180)]], Len(2)]
+
+    @model_validator(mode="after")
+    def _monotone(self):
+        if len(self.zoom) != len(self.fov_h_deg):
+            raise ValueError("zoom and fov_h_deg must have the same length")
+        if any(b <= a for a, b in zip(self.zoom, self.zoom[1:])):
+            raise ValueError("zoom must increase strictly")
+        if any(b >= a for a, b in zip(self.fov_h_deg, self.fov_h_deg[1:])):
+            raise ValueError("fov_h_deg must decrease strictly as zoom grows")
+        return self
+
+
+class FovealSection(_Section):
+    D_c: NonNeg = Field(description="floor distance from the omni axis to the PTZ, m")
+    sigma_D_c: NonNeg
+    theta_c_deg: float = Field(description="azimuth of the PTZ around the omni axis, deg")
+    sigma_theta_c_deg: NonNeg
+    H_f: Pos = Field(description="height of the PTZ's rotation centre, m")
+    sigma_H_f: NonNeg
+    pan_limits_deg: Pair
+    tilt_limits_deg: Pair
+    image_size: Size
+    zoom_range: PosPair
+    lens: LensSection
+
+    @model_validator(mode="after")
+    def _ranges(self):
+        for key in ("pan_limits_deg", "tilt_limits_deg", "zoom_range"):
+            lo, hi = getattr(self, key)
+            if not lo < hi:
+                raise ValueError(f"{key} must be [low, high] with low < high")
+        if self.zoom_range[0] < self.lens.zoom[0] or self.zoom_range[1] > self.lens.zoom[-1]:
+            raise ValueError(
+                f"zoom_range {self.zoom_range} must lie inside the lens table "
+                f"[{self.lens.zoom[0]}, {self.lens.zoom[-1]}]"
+            )
+        return self
+
+
+class PersonSection(_Section):
+    H_p: Pos = Field(description="person height, m")
+    sigma_H_p: NonNeg
+    R_h: Pos = Field(description="head radius, m")
+    sigma_R_h: NonNeg
+    shoulder_width: Pos
+
+    @model_validator(mode="after")
+    def _head(self):
+        if self.R_h >= self.H_p / 2:
+            raise ValueError("R_h must be less than half of H_p")
+        return self
+
+
+class DetectionSection(_Section):
+    sensor_sigma: Pos = Field(description="sensor noise per channel, grey levels")
+    x_f: Prob = Field(description="false-alarm probability of a background radial line (eq 10)")
+    x_m: Prob = Field(description="miss rate per person of contrast >= c_min")
+    sigma_r_f: Pos = Field(description="default sigma of the foot radius, px")
+    sigma_theta_f_deg: Pos = Field(description="default sigma of the foot azimuth, deg")
+    c_min: Pos = Field(4.0, description="smallest person contrast (non-centrality per pixel) x_m holds for")
+    n_theta: Annotated[int, Field(ge=36, le=4096)] = Field(360, description="radial lines")
+    min_floor_radius: NonNeg = Field(0.3, description="floor radius under the camera left out, m")
+    r_max: Pos | None = Field(None, description="outer radius of the polar sampling, px (default: room)")
+    max_people: Annotated[int, Field(ge=1, le=64)] = 8
+    background_frames: Annotated[int, Field(ge=3, le=1000)] = 30
+    adapt_rate: Annotated[float, Field(ge=0, lt=1)] = Field(0.02, description="background adaptation")
+    foot_mc_profiles: Annotated[int, Field(ge=16, le=4096)] = Field(
+        256, description="Monte Carlo profiles per table cell of sigma_r_f")
+
+
+class ZoomSection(_Section):
+    p_contain: Prob = Field(description="probability that the whole head is in the foveal frame")
+    rule: Literal["paper", "calibrated"] = "calibrated"
+
+
+class RoomSection(_Section):
+    outline: Polygon = Field(description="floor outline polygon [[x, y], ...] in m")
+    exclude: list[Polygon] = Field(default_factory=list, description="excluded floor zones")
+
+
+#: Landscape cells per varied variable when ``[layout] landscape`` is not given (by number varied).
+LANDSCAPE_DEFAULT = {1: 31, 2: 15, 3: 7, 4: 5}
+#: Most layouts the landscape may hold, and most floor points the objective may average over.
+LANDSCAPE_MAX, FLOOR_POINTS_MAX = 20_000, 20_000
+
+
+class LayoutSection(_Section):
+    vary: Annotated[list[Literal["D_c", "H_f", "theta_c", "H_o"]], Len(1, 4)] = Field(
+        default_factory=lambda: ["D_c", "H_f"], description="placement variables to search"
+    )
+    objective: Literal["face_px", "variance"] = "face_px"
+    statistic: Literal["mean", "worst"] = "mean"
+    D_c: Pair | None = Field(None, description="bounds of D_c, m")
+    H_f: Pair | None = Field(None, description="bounds of H_f, m")
+    theta_c_deg: Pair | None = Field(None, description="bounds of theta_c, deg")
+    H_o: Pair | None = Field(None, description="bounds of H_o, m (required to search H_o)")
+    grid_step: Annotated[float, Field(ge=0.02, le=2.0)] = Field(0.25, description="floor grid spacing, m")
+    near_radius: Annotated[float, Field(ge=0.1)] = Field(1.0, description="left out around the PTZ's foot, m")
+    face_target_px: Pos = Field(60.0, description="face width that bounds the operational region, px")
+    starts: Annotated[int, Field(ge=1, le=32)] = 4
+    landscape: Annotated[int, Field(ge=3, le=401)] | None = None
+
+    @model_validator(mode="after")
+    def _bounds(self):
+        if len(set(self.vary)) != len(self.vary):
+            raise ValueError(f"vary must not repeat a variable (got {self.vary})")
+        for key in ("D_c", "H_f", "theta_c_deg", "H_o"):
+            pair = getattr(self, key)
+            if pair is not None and not pair[0] < pair[1]:
+                raise ValueError(f"{key} must be [low, high] with low < high (got {pair})")
+        if self.D_c is not None and self.D_c[0] < 0:
+            raise ValueError(f"D_c bounds must be >= 0 m (got {self.D_c})")
+        if self.H_f is not None and self.H_f[0] <= 0:
+            raise ValueError(f"H_f bounds must be > 0 m (got {self.H_f})")
+        if self.theta_c_deg is not None and self.theta_c_deg[1] - self.theta_c_deg[0] > 360:
+            raise ValueError(f"theta_c_deg bounds may span at most 360 deg (got {self.theta_c_deg})")
+        if "H_o" in self.vary and self.H_o is None:
+            raise ValueError("H_o bounds [low, high] are required when vary includes H_o")
+        cells = (self.landscape or LANDSCAPE_DEFAULT[len(self.vary)]) ** len(self.vary)
+        if cells > LANDSCAPE_MAX:
+            raise ValueError(
+                f"landscape^{len(self.vary)} = {cells} layouts is more than {LANDSCAPE_MAX}; lower landscape"
+            )
+        return self
+
+
+class RigFile(_Section):
+    omni: OmniSection
+    foveal: FovealSection
+    person: PersonSection
+    detection: DetectionSection
+    zoom: ZoomSection
+    room: RoomSection
+    layout: LayoutSection = Field(default_factory=LayoutSection)
+
+    @model_validator(mode="after")
+    def _heights(self):
+        if self.person.H_p >= self.omni.H_o:
+            raise ValueError(
+                f"person.H_p = {self.person.H_p} m must be below omni.H_o = {self.omni.H_o} m"
+            )
+        if self.layout.H_o is not None and self.layout.H_o[0] <= self.person.H_p:
+            raise ValueError(
+                f"layout.H_o bounds {self.layout.H_o} must lie above person.H_p = {self.person.H_p} m"
+            )
+        return self
+
+
+# --------------------------------------------------------------------------------------
+# Mapping -> Rig
+# --------------------------------------------------------------------------------------
+
+
+def _one_line(exc: pydantic.ValidationError, source: str) -> str:
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err["loc"])
+    msg = err["msg"].removeprefix("Value error, ")
+    if err["type"] == "missing":
+        msg = "missing key"
+    elif err["type"] == "extra_forbidden":
+        msg = "unknown key"
+    value = err.get("input")
+    shown = err["type"] not in ("missing", "extra_forbidden", "value_error") and not isinstance(value, dict)
+    got = f" (got {value!r})" if shown else ""
+    return f"{source}: {loc or '(top level)'}: {msg}{got}"
+
+
+def _a(x) -> Array:
+    return jnp.asarray(x, dtype=float)
+
+
+def _omni_camera(sec: OmniSection, read_text: Callable[[str], str] | None, source: str) -> OmniCamera:
+    if sec.model == "ocamcalib":
+        if read_text is None:
+            raise ConfigError(f"{source}: omni.calib_file: cannot read files here")
+        try:
+            calib = parse_ocamcalib(read_text(sec.calib_file))
+        except OSError as exc:
+            raise ConfigError(f"{source}: omni.calib_file: cannot read {sec.calib_file!r}: {exc.strerror}") from exc
+        except ValueError as exc:
+            raise ConfigError(f"{source}: omni.calib_file: {exc}") from exc
+        profile = OCamCalib(ss=_a(calib.ss), invpol=_a(calib.invpol), rho0=calib.horizon_radius)
+        width = calib.width + calib.crop_left + calib.crop_right
+        size = tuple(sec.image_size) if sec.image_size else (width, calib.height)
+        center = sec.center or [calib.center_col + calib.crop_left, calib.center_row]
+        r_m = sec.r_m or calib.horizon_radius
+        rim = sec.rim or calib.roi_max or r_m
+        affine = calib.affine
+    else:
+        profile = PROFILES[sec.model]()
+        size, center, r_m, affine = tuple(sec.image_size), sec.center, sec.r_m, (1.0, 0.0, 0.0)
+        if sec.rim is not None:
+            rim = sec.rim
+        elif sec.fov_deg is not None:
+            rim = float(r_m * profile.u(math.radians(sec.fov_deg) / 2))
+        else:
+            rim = r_m
+    return OmniCamera(
+        profile=profile, center=_a(center), r_m=_a(r_m), rim=_a(rim), H_o=_a(sec.H_o),
+        affine=_a(affine), image_size=(int(size[0]), int(size[1])),
+    )
+
+
+def _wall_distance(outline: np.ndarray, azimuth: float) -> float | None:
+    """Distance from the omni axis along ``azimuth`` to the nearest crossing of the room's outline."""
+    d = np.array([math.cos(azimuth), math.sin(azimuth)])
+    a, b = outline, np.roll(outline, -1, axis=0)
+    e = b - a
+    denom = d[0] * e[:, 1] - d[1] * e[:, 0]
+    ok = np.abs(denom) > 1e-12
+    safe = np.where(ok, denom, 1.0)
+    dist = (a[:, 0] * e[:, 1] - a[:, 1] * e[:, 0]) / safe  # along the ray
+    frac = (a[:, 0] * d[1] - a[:, 1] * d[0]) / safe  # along the edge
+    hits = dist[ok & (dist > 1e-9) & (frac >= 0) & (frac <= 1)]
+    return float(hits.min()) if hits.size else None
+
+
+def _layout_search(f: RigFile, source: str) -> LayoutSearch:
+    """The ``[layout]`` section with its defaults filled in from the rig (see configs/paper.toml)."""
+    la, fo, pe = f.layout, f.foveal, f.person
+    outline = np.asarray(f.room.outline, float)
+    wall = _wall_distance(outline, math.radians(fo.theta_c_deg))
+    reach = wall if wall is not None else float(np.hypot(outline[:, 0], outline[:, 1]).max())
+    defaults = {
+        "D_c": (min(0.25, fo.D_c), max(fo.D_c, reach)),
+        "H_f": (min(fo.H_f, pe.H_p - pe.R_h - 0.5), max(fo.H_f, f.omni.H_o)),
+        "theta_c": (math.radians(fo.theta_c_deg - 180.0), math.radians(fo.theta_c_deg + 180.0)),
+        "H_o": (f.omni.H_o, f.omni.H_o),  # no default box: required when H_o is searched
+    }
+    given = {"D_c": la.D_c, "H_f": la.H_f, "H_o": la.H_o,
+             "theta_c": None if la.theta_c_deg is None else [math.radians(v) for v in la.theta_c_deg]}
+    bounds = [given[n] if given[n] is not None else defaults[n] for n in LAYOUT_NAMES]
+    x0, x1 = outline.min(0), outline.max(0)
+    points = math.prod(math.ceil((hi - lo) / la.grid_step) for lo, hi in zip(x0, x1))
+    if points > FLOOR_POINTS_MAX:
+        raise ConfigError(
+            f"{source}: layout.grid_step: {la.grid_step} m gives about {points} floor points over the room's "
+            f"bounding box, more than {FLOOR_POINTS_MAX}; expected a coarser step"
+        )
+    return LayoutSearch(
+        vary=tuple(n for n in LAYOUT_NAMES if n in la.vary),
+        lower=_a([b[0] for b in bounds]), upper=_a([b[1] for b in bounds]),
+        objective=la.objective, statistic=la.statistic, grid_step=float(la.grid_step),
+        near_radius=_a(la.near_radius), face_target_px=_a(la.face_target_px), starts=la.starts,
+        landscape=la.landscape or LANDSCAPE_DEFAULT[len(la.vary)],
+    )
+
+
+def parse_rig(
+    data: Mapping[str, Any], *, source: str = "config", read_text: Callable[[str], str] | None = None
+) -> Rig:
+    """Validate a parsed TOML mapping and build the :class:`Rig`.
+
+    ``read_text`` reads files the config names (the OCamCalib calibration), relative
+    to the config; it is the only I/O, and the caller provides it.
+    Raises :class:`ConfigError` with one line naming the key and what was expected.
+    """
+    try:
+        f = RigFile.model_validate(dict(data))
+    except pydantic.ValidationError as exc:
+        raise ConfigError(_one_line(exc, source)) from None
+    omni = _omni_camera(f.omni, read_text, source)
+    fo = f.foveal
+    lens = Lens(
+        zoom=_a(fo.lens.zoom), fov_h=_a(np.radians(fo.lens.fov_h_deg)),
+        zoom_range=_a(fo.zoom_range), image_size=(fo.image_size[0], fo.image_size[1]),
+    )
+    foveal = Foveal(
+        D_c=_a(fo.D_c), theta_c=_a(math.radians(fo.theta_c_deg)), H_f=_a(fo.H_f),
+        pan_limits=_a(np.radians(fo.pan_limits_deg)), tilt_limits=_a(np.radians(fo.tilt_limits_deg)),
+        lens=lens,
+    )
+    pe = f.person
+    person = Person(H_p=_a(pe.H_p), R_h=_a(pe.R_h), shoulder_width=_a(pe.shoulder_width))
+    sigmas = Sigmas(
+        H_o=_a(f.omni.sigma_H_o), H_f=_a(fo.sigma_H_f), D_c=_a(fo.sigma_D_c),
+        theta_c=_a(math.radians(fo.sigma_theta_c_deg)), r_m=_a(f.omni.sigma_r_m),
+        H_p=_a(pe.sigma_H_p), R_h=_a(pe.sigma_R_h),
+    )
+    de = f.detection
+    detection = Detection(
+        sensor_sigma=_a(de.sensor_sigma), x_f=_a(de.x_f), x_m=_a(de.x_m),
+        sigma_r_f=_a(de.sigma_r_f), sigma_theta_f=_a(math.radians(de.sigma_theta_f_deg)),
+        c_min=_a(de.c_min), adapt_rate=_a(de.adapt_rate), min_floor_radius=_a(de.min_floor_radius),
+        n_theta=de.n_theta, max_people=de.max_people, background_frames=de.background_frames,
+        foot_mc_profiles=de.foot_mc_profiles, r_max=de.r_max,
+    )
+    room = Room(outline=_a(f.room.outline), exclude=tuple(_a(p) for p in f.room.exclude))
+    return Rig(
+        omni=omni, foveal=foveal, person=person, sigmas=sigmas, detection=detection, room=room,
+        p_contain=_a(f.zoom.p_contain), layout=_layout_search(f, source), zoom_rule=f.zoom.rule,
+    )

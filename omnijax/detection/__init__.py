@@ -1,0 +1,48 @@
+"""The people detector: chromaticity, change measure, background, polar indexing, the foot (eq 5-12)."""
+
+from ._change import (
+    Background as Background,
+    MEASURES as MEASURES,
+    adapt_background as adapt_background,
+    change_image as change_image,
+    change_measure as change_measure,
+    grey_change_measure as grey_change_measure,
+    learn_background as learn_background,
+    sensor_noise as sensor_noise,
+)
+from ._chroma import (
+    chromaticity as chromaticity,
+    chromaticity_covariance as chromaticity_covariance,
+)
+from ._detector import (
+    DetectionTrace as DetectionTrace,
+    Detections as Detections,
+    Detector as Detector,
+    LineBackground as LineBackground,
+    build_detector as build_detector,
+    detect as detect,
+    find_sectors as find_sectors,
+    line_background as line_background,
+    line_change as line_change,
+    locate_feet as locate_feet,
+    sector_mask as sector_mask,
+)
+from ._foot import (
+    FootSigmaTable as FootSigmaTable,
+    foot_estimate as foot_estimate,
+    foot_scores as foot_scores,
+    foot_sigma_mc as foot_sigma_mc,
+)
+from ._indexing import (
+    Sectors as Sectors,
+    Thresholds as Thresholds,
+    chi2_variate as chi2_variate,
+    hysteresis_sectors as hysteresis_sectors,
+    noncentral_chi2_variate as noncentral_chi2_variate,
+    window_profile as window_profile,
+)
+from ._polar import (
+    PolarIndex as PolarIndex,
+    build_polar_index as build_polar_index,
+    polar_range as polar_range,
+)

@@ -1,0 +1,169 @@
+"""Indexing (eq 8-10, corrected eq 9): thresholds, psi1 hysteresis over theta, psi2 window profiles.
+
+- Background radial sums ``M(theta)`` are chi-square with ``dof(theta)`` = the line's
+  samples times the measure's dof per sample (2 for chromaticity; eq 8; the polar
+  index keeps a line's samples distinct so that this holds).
+- The lower threshold ``T_l`` is its ``1 - x_f`` quantile (eq 10).
+- The upper threshold ``T_u`` (a sector's seed) is the ``x_m`` quantile of a person's
+  line sum: eq 9 corrected, ``chi2(dof - 2k) + noncentral chi2(2k, k c_min)``, with ``k``
+  the person's samples on the line simulated from the person priors over the room. If ``T_u`` falls below ``T_l``, ``c_min`` is too low for
+  both rates; the seed is then raised to ``T_l`` and ``feasible`` is False.
+- psi1: sectors are the circular runs of ``M > T_l`` that hold an ``M > T_u`` seed.
+- psi2: along a sector's centre line, ``d2_bar(r)`` sums d^2 over the window of a
+  person's width across the line; its background is chi-square with 2 x window.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray, Shaped, UInt8
+from scipy.optimize import brentq
+from scipy.stats import chi2, ncx2
+
+from ..camera import OmniCamera
+from ._change import MEASURES
+from ..config import Rig
+from ..geometry import person_image_extent
+from ._polar import PolarIndex, body_radius
+
+#: Two-sided 99 % normal quantile: a sector's width is taken as theta_f's 99 % interval.
+Z99 = 2.5758293035489
+
+
+class Thresholds(eqx.Module):
+    """Per-line lower and upper thresholds of ``M(theta)``, per-radius psi2 thresholds."""
+
+    lower: Float[Array, " T"]
+    upper: Float[Array, " T"]
+    window: Float[Array, " R"]
+    feasible: Bool[Array, ""]
+    seed_false_alarm: Float[Array, ""]
+
+
+def chi2_variate(key, dof, shape=()) -> Array:
+    """chi-square(dof) draws: 2 Gamma(dof / 2)."""
+    return 2.0 * jax.random.gamma(key, 0.5 * dof, shape)
+
+
+def noncentral_chi2_variate(key, dof, nc, shape=()) -> Array:
+    """Noncentral chi-square(dof, nc) draws: a Poisson(nc / 2) mixture of central ones."""
+    k1, k2 = jax.random.split(key)
+    j = jax.random.poisson(k1, 0.5 * nc, shape)
+    return 2.0 * jax.random.gamma(k2, 0.5 * dof + j, shape)
+
+
+def person_line_lengths(rig: Rig, polar: PolarIndex, key: PRNGKeyArray, n: int) -> Array:
+    """Samples ``k`` (px) that a person covers on its centre line, from the priors.
+
+    Positions are uniform over the room's floor (outline minus excluded zones),
+    heights from N(H_p, sigma_H_p); lengths are clipped to the sampled radii.
+    """
+    k_pos, k_h = jax.random.split(key)
+    poly = rig.room.outline
+    lo, hi = poly.min(0), poly.max(0)
+    pts = jax.random.uniform(k_pos, (4 * n, 2), minval=lo, maxval=hi)
+    inside = rig.room.contains(pts[:, 0], pts[:, 1])
+    order = jnp.argsort(~inside, stable=True)[:n]  # the first n points inside the room
+    R = jnp.hypot(pts[order, 0], pts[order, 1])
+    H_p = rig.person.H_p + rig.sigmas.H_p * jax.random.normal(k_h, (n,))
+    r_in, r_out = person_image_extent(R, rig.omni, H_p, rig.person.R_h, body_radius(rig))
+    r0, r1 = polar.radii[0], polar.radii[-1] + 1
+    return jnp.clip(r_out, r0, r1) - jnp.clip(r_in, r0, r1)
+
+
+def upper_threshold(dof: float, k: np.ndarray, c_min: float, x_m: float) -> float:
+    """The ``x_m`` quantile of a person's line sum over the prior of its length ``k`` (eq 9, corrected).
+
+    Given ``k`` samples on the person, ``chi2(dof - 2k) + noncentral chi2(2k, k c)``
+    (2 dof per chromaticity sample) is exactly ``noncentral chi2(dof, k c)``; the
+    mixture over the simulated ``k`` is solved for its quantile with SciPy.
+    """
+    ks, counts = np.unique(np.round(k), return_counts=True)
+    w = counts / counts.sum()
+    cdf = lambda t: float(np.sum(w * ncx2.cdf(t, dof, np.maximum(ks, 1.0) * c_min)))  # noqa: E731
+    lo, hi = chi2.ppf(1e-9, dof), ncx2.ppf(1 - 1e-9, dof, ks.max() * c_min)
+    return brentq(lambda t: cdf(t) - x_m, lo, hi, xtol=1e-6 * hi)
+
+
+def build_thresholds(rig: Rig, polar: PolarIndex, key: PRNGKeyArray, dof_per_sample: int = 2,
+                     n_sim: int = 20_000) -> Thresholds:
+    """Thresholds for the rig's ``x_f``, ``x_m`` and ``c_min`` (built once, outside jit)."""
+    det = rig.detection
+    x_f, x_m, c_min = float(det.x_f), float(det.x_m), float(det.c_min)
+    dof = dof_per_sample * np.asarray(polar.samples)
+    lower = chi2.ppf(1 - x_f, dof)
+    k_line = np.asarray(jax.jit(person_line_lengths, static_argnums=3)(rig, polar, key, n_sim))
+    distinct, inverse = np.unique(dof, return_inverse=True)
+    frac = distinct / (dof_per_sample * polar.n_r)  # share of a line's samples that are distinct
+    upper = np.array([upper_threshold(d, k_line * f, c_min, x_m) for d, f in zip(distinct, frac)])[inverse]
+    feasible = bool(np.all(upper >= lower))
+    upper = np.maximum(upper, lower)
+    window = chi2.ppf(1 - x_f, dof_per_sample * np.asarray(polar.window_px))
+    seed_fa = float(np.sum(chi2.sf(upper, dof)))
+    return Thresholds(lower=jnp.asarray(lower), upper=jnp.asarray(upper), window=jnp.asarray(window),
+                      feasible=jnp.asarray(feasible), seed_false_alarm=jnp.asarray(seed_fa))
+
+
+class Sectors(eqx.Module):
+    """Up to K sectors of significant change: first and last line, peak M, validity."""
+
+    first: Int[Array, " K"]
+    last: Int[Array, " K"]
+    peak: Float[Array, " K"]
+    valid: Bool[Array, " K"]
+
+
+def hysteresis_sectors(M: Float[Array, " T"], lower: Float[Array, " T"], upper: Float[Array, " T"],
+                       max_sectors: int) -> Sectors:
+    """psi1: Canny's hysteresis on the circle of lines, vectorised.
+
+    Runs of ``M > lower`` (wrapping around theta = 0) that contain a line with
+    ``M > upper``; the ``max_sectors`` with the largest peaks. ``last`` may exceed
+    ``T - 1`` for a run that wraps; take it modulo T.
+    """
+    T = M.shape[0]
+    above = M > lower
+    shift = jnp.argmin(above)  # a line below the lower threshold (0 if every line is above)
+    a = jnp.roll(above, -shift)
+    seed = jnp.roll(M > upper, -shift)
+    m = jnp.roll(M, -shift)
+    start = a & ~jnp.roll(a, 1)
+    run = jnp.where(a, jnp.cumsum(start) - 1, T)
+    idx = jnp.arange(T)
+    seeded = jax.ops.segment_max(seed.astype(jnp.int32), run, num_segments=T + 1)[:T] > 0
+    first = jax.ops.segment_min(idx, run, num_segments=T + 1)[:T]
+    last = jax.ops.segment_max(idx, run, num_segments=T + 1)[:T]
+    peak = jax.ops.segment_max(m, run, num_segments=T + 1)[:T]
+    ok = seeded & (first <= last)
+    top, which = jax.lax.top_k(jnp.where(ok, peak, -jnp.inf), max_sectors)
+    return Sectors(first=first[which] + shift, last=last[which] + shift, peak=top, valid=ok[which])
+
+
+def gather_rgb(image: Shaped[Array, "H W 3"], flat: Int[Array, "*b"]) -> Shaped[Array, "*b 3"]:
+    """``image``'s colours at flat pixel indices, as three single-channel gathers (XLA's CPU
+    gather of 3-element rows is several times slower)."""
+    data, idx = image.reshape(-1), 3 * flat
+    return jnp.stack([data[idx], data[idx + 1], data[idx + 2]], -1)
+
+
+def window_profile(frame: UInt8[Array, "H W 3"], bg_mean: Float[Array, "H W 3"], bg_var: Float[Array, "H W"],
+                   sigma: Float[Array, "H W"], omni: OmniCamera, polar: PolarIndex, theta,
+                   measure: str = "chromaticity") -> tuple[Array, Array]:
+    """psi2 along the line at ``theta``: ``(d2_bar(r), pixels(r))`` summed across the window.
+
+    The window's sensor offsets are rotated onto the line (one sine and cosine per
+    line), mapped to pixels with the camera's affinity, and sampled nearest-neighbour.
+    """
+    s, c = jnp.sin(theta), jnp.cos(theta)
+    a, b = polar.window_ab[..., 0], polar.window_ab[..., 1]
+    x, y = omni.sensor_to_pixel(s * a + c * b, c * a - s * b)
+    W, H = polar.image_size
+    xi, yi = jnp.round(x).astype(jnp.int32), jnp.round(y).astype(jnp.int32)
+    ok = polar.window_ok & (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
+    flat = jnp.where(ok, yi * W + xi, 0)
+    cur = frame.reshape(-1, 3)[flat].astype(jnp.float32)
+    d2 = MEASURES[measure][0](cur, bg_mean.reshape(-1, 3)[flat], bg_var.reshape(-1)[flat], sigma.reshape(-1)[flat])
+    return jnp.where(ok, d2, 0.0).sum(-1), ok.sum(-1).astype(jnp.float32)

@@ -1,0 +1,140 @@
+"""Polar indexing of the omni image (eq 8-10 set-up): precomputed sample positions.
+
+Built once per rig (NumPy-free, but not traced: sizes come out of the geometry):
+
+- radial lines: ``n_theta`` lines, one sample per pixel of radius from ``r_min`` to
+  ``r_max``, nearest-neighbour, with a flag for samples that repeat the previous
+  pixel of the line (they are left out, so that the samples of a line stay
+  independent and ``M(theta)`` is chi-square with ``samples(theta)`` times the
+  measure's degrees of freedom per sample);
+- psi2 windows: at each radius, the pixels across the line over the width of a
+  person there, as sensor offsets to rotate onto any sector's centre line;
+- foot hypotheses: for each inner end ``i`` of a person along a line, the index just
+  past its outer end, and the image radius of its axis foot (what eq 1 turns into R_p).
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+from ..config import Rig
+from ..geometry import floor_radius, person_image_extent, point_image_radius
+
+
+class PolarIndex(eqx.Module):
+    """Precomputed sampling of the omni image; see the module docstring."""
+
+    theta: Float[Array, " T"]
+    radii: Float[Array, " R"]
+    line_index: Int[Array, "T R"]
+    line_ok: Bool[Array, "T R"]
+    samples: Float[Array, " T"]
+    window_ab: Float[Array, "R W 2"]
+    window_ok: Bool[Array, "R W"]
+    window_px: Float[Array, " R"]
+    hyp_out: Int[Array, " R"]
+    hyp_ok: Bool[Array, " R"]
+    hyp_r_f: Float[Array, " R"]
+    hyp_dout_dH: Float[Array, " R"]
+    hyp_width: Float[Array, " R"]
+    image_size: tuple[int, int] = eqx.field(static=True)
+
+    @property
+    def n_theta(self) -> int:
+        return self.theta.shape[0]
+
+    @property
+    def n_r(self) -> int:
+        return self.radii.shape[0]
+
+
+def body_radius(rig: Rig) -> Array:
+    """Radius of the person's body cylinder (m): half the shoulder width."""
+    return 0.5 * rig.person.shoulder_width
+
+
+def polar_range(rig: Rig) -> tuple[float, float]:
+    """Radii (px) between which people are sought: from the floor circle of ``min_floor_radius``
+    to the outer end of a person standing at the room's farthest point (or ``r_max``)."""
+    omni, det = rig.omni, rig.detection
+    r_min = float(point_image_radius(det.min_floor_radius, 0.0, omni.r_m, omni.H_o, omni.profile))
+    if det.r_max is not None:
+        r_max = det.r_max
+    else:
+        poly = np.asarray(rig.room.outline)
+        t = np.linspace(0.0, 1.0, 64)[:, None]
+        edges = np.concatenate([a + t * (b - a) for a, b in zip(poly, np.roll(poly, -1, 0))])
+        R_far = float(np.hypot(edges[:, 0], edges[:, 1]).max())
+        _, r_out = person_image_extent(R_far, omni, rig.person.H_p, rig.person.R_h, body_radius(rig))
+        r_max = float(r_out) + 2.0
+    W, H = omni.image_size
+    r_max = min(r_max, float(omni.rim), math.hypot(W, H))
+    if not r_max > r_min + 8:
+        raise ValueError(f"polar range [{r_min:.1f}, {r_max:.1f}] px is empty: check omni.rim and detection.r_max")
+    return r_min, r_max
+
+
+@jax.jit
+def _geometry_tables(rig: Rig, radii, theta):
+    """Pixels of the line samples; per radius: floor radius, and the outer end and axis-foot
+    radius of a person whose inner end, as the psi2 window sees it, is there.
+
+    The window spans the body's width across the line, so it sees the body's round base
+    start, on average over its columns, ``pi rho / 4`` before the axis (the mean of
+    ``sqrt(rho^2 - y^2)`` over ``|y| < rho``), not ``rho``.
+    """
+    omni = rig.omni
+    x, y = omni.to_pixel(radii[None, :], theta[:, None])
+    R_floor = floor_radius(radii, omni.r_m, omni.H_o, omni.profile)[0]
+    rho = body_radius(rig)
+    R_axis = R_floor + 0.25 * jnp.pi * rho
+    outer = lambda H_p: person_image_extent(R_axis, omni, H_p, rig.person.R_h, rho)[1]  # noqa: E731
+    r_out, dout_dH = jax.jvp(outer, (rig.person.H_p,), (jnp.ones_like(rig.person.H_p),))
+    r_f = point_image_radius(R_axis, 0.0, omni.r_m, omni.H_o, omni.profile)
+    width = 2 * jnp.arcsin(jnp.minimum(rho / R_axis, 1.0))  # a vertical cylinder's azimuth span
+    return x, y, R_floor, r_out, r_f, dout_dH, width
+
+
+def build_polar_index(rig: Rig) -> PolarIndex:
+    """Sample positions, windows and foot hypotheses for ``rig`` (run once, outside jit)."""
+    omni, det = rig.omni, rig.detection
+    W_img, H_img = omni.image_size
+    r_min, r_max = polar_range(rig)
+    n_r = int(math.floor(r_max - r_min))
+    radii = r_min + np.arange(n_r, dtype=float)
+    theta = 2 * np.pi * np.arange(det.n_theta) / det.n_theta
+
+    x, y, R_floor, r_out, hyp_r_f, dout_dH, hyp_width = (np.asarray(v) for v in _geometry_tables(rig, jnp.asarray(radii), jnp.asarray(theta)))
+    xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
+    inside = (xi >= 0) & (xi < W_img) & (yi >= 0) & (yi < H_img)
+    flat = np.where(inside, yi * W_img + xi, 0)
+    repeat = np.zeros_like(inside)
+    repeat[:, 1:] = flat[:, 1:] == flat[:, :-1]
+    line_ok = inside & ~repeat
+
+    rho = float(body_radius(rig))
+    width = np.maximum(3, 2 * np.floor(radii * np.arctan(rho / (R_floor + rho)))) + 1  # odd, >= 3
+    w_max = int(width.max())
+    j = np.arange(w_max) - (w_max - 1) / 2
+    delta = j[None, :] / radii[:, None]
+    window_ab = np.stack([radii[:, None] * np.cos(delta), radii[:, None] * np.sin(delta)], -1)
+    window_ok = np.abs(j)[None, :] <= (width[:, None] - 1) / 2
+
+    hyp_out = np.ceil(r_out - r_min).astype(np.int64)
+    hyp_ok = (hyp_out <= n_r) & (hyp_out > np.arange(n_r))
+    return PolarIndex(
+        theta=jnp.asarray(theta), radii=jnp.asarray(radii),
+        line_index=jnp.asarray(flat, dtype=jnp.int32), line_ok=jnp.asarray(line_ok),
+        samples=jnp.asarray(line_ok.sum(1), dtype=float),
+        window_ab=jnp.asarray(window_ab, dtype=jnp.float32), window_ok=jnp.asarray(window_ok),
+        window_px=jnp.asarray(width),
+        hyp_out=jnp.asarray(np.minimum(hyp_out, n_r), dtype=jnp.int32), hyp_ok=jnp.asarray(hyp_ok),
+        hyp_r_f=jnp.asarray(hyp_r_f), hyp_dout_dH=jnp.asarray(dout_dH),
+        hyp_width=jnp.asarray(hyp_width), image_size=(W_img, H_img),
+    )

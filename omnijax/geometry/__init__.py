@@ -1,0 +1,22 @@
+"""Dual-camera geometry (eq 1-4): image radius -> floor -> pan and tilt; floor <-> image conversions."""
+
+from ._floor import (
+    floor_measurement as floor_measurement,
+    image_position as image_position,
+)
+from ._pointing import (
+    D_P_MIN as D_P_MIN,
+    PHI_FLOOR_MAX as PHI_FLOOR_MAX,
+    Pointing as Pointing,
+    floor_radius as floor_radius,
+    foveal_offsets as foveal_offsets,
+    head_image_radius as head_image_radius,
+    image_to_floor as image_to_floor,
+    point_image_radius as point_image_radius,
+    pointing as pointing,
+    world_to_image as world_to_image,
+)
+from ._person import (
+    SHOULDER as SHOULDER,
+    person_image_extent as person_image_extent,
+)

@@ -1,0 +1,382 @@
+"""Scenario files of the synthetic world: a TOML schema and the PyTree the renderer takes.
+
+A scenario names its rig file (``rig = "../paper.toml"``, relative to the
+scenario) and adds what the rig does not say: the room's walls and textures,
+furniture boxes, the people (how many, clothing, walking), the lamps (one shared
+spectrum, positions, intensities, switching times), slow illumination drift, and
+the sensor (noise, JPEG, anti-aliasing). Every key is documented in
+``configs/scenarios/one_person.toml``.
+
+:func:`parse_scenario` validates the mapping against the schema and against the
+rig (lamps below the ceiling and inside the room, ...) and builds
+:class:`Scenario`; every failure is a :class:`ConfigError` with one line naming
+the key and what was expected.
+
+Light is in grey levels: a lamp's ``intensity`` is the grey level of a white
+(albedo 1) surface 1 m from the lamp and facing it; ``ambient`` is the grey
+level of a white surface under the ambient light alone. Albedos are linear RGB
+in [0, 1]; the camera's response is linear.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Annotated, Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pydantic
+from annotated_types import Len
+from jaxtyping import Array, Bool, Float
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from ..config._config import ConfigError, Rig, _in_polygon, _one_line
+
+# --------------------------------------------------------------------------------------
+# Kernel-side types
+# --------------------------------------------------------------------------------------
+
+
+class Surface(eqx.Module):
+    """Look of a surface: mean albedo, per-tile spread, fine texture (relative) and its scale (m).
+
+    ``tile`` is the tile edge (m, 0: no tiles); tiles are separated by grout
+    lines of width ``grout`` (m) and colour ``grout_colour``.
+    """
+
+    colour: Float[Array, "3"]
+    tile: Float[Array, ""]
+    grout: Float[Array, ""]
+    grout_colour: Float[Array, "3"]
+    tile_variation: Float[Array, ""]
+    texture: Float[Array, ""]
+    texture_scale: Float[Array, ""]
+
+
+class Furniture(eqx.Module):
+    """Axis-aligned boxes standing on the floor: footprint corners (m), heights (m), albedos."""
+
+    lo: Float[Array, "n 2"]
+    hi: Float[Array, "n 2"]
+    height: Float[Array, " n"]
+    colour: Float[Array, "n 3"]
+
+    @property
+    def count(self) -> int:
+        return self.lo.shape[0]
+
+
+class Crowd(eqx.Module):
+    """How many people, how they walk, and what they wear.
+
+    ``speed`` is the range of preferred walking speeds (m/s); at each reached
+    goal a person stands still with probability ``pause_probability`` for a
+    time drawn from ``pause`` (s). ``floor_like`` is the share of people whose
+    clothing is close to the floor's colour. ``gap`` is the smallest distance
+    (m) kept between two people's body cylinders.
+    """
+
+    count: int = eqx.field(static=True)
+    speed: Float[Array, "2"]
+    pause_probability: Float[Array, ""]
+    pause: Float[Array, "2"]
+    gap: Float[Array, ""]
+    clothing: Float[Array, "k 3"]
+    skin: Float[Array, "ks 3"]
+    hair: Float[Array, "kh 3"]
+    floor_like: Float[Array, ""]
+
+
+class Lighting(eqx.Module):
+    """Lamps of one spectrum, ambient light of the same spectrum, and a slow global drift.
+
+    ``switch`` holds each lamp's switching times (s), padded with +inf; a lamp
+    is on at time t when ``on`` xor (an odd number of switches at or before t).
+    The drift multiplies all light by ``1 + drift_amplitude sin(2 pi t / drift_period)``.
+    """
+
+    spectrum: Float[Array, "3"]
+    ambient: Float[Array, ""]
+    position: Float[Array, "k 3"]
+    intensity: Float[Array, " k"]
+    on: Bool[Array, " k"]
+    switch: Float[Array, "k m"]
+    drift_amplitude: Float[Array, ""]
+    drift_period: Float[Array, ""]
+
+    @property
+    def count(self) -> int:
+        return self.position.shape[0]
+
+    def lamp_on(self, t) -> Bool[Array, " k"]:
+        """Which lamps are on at time ``t`` (s)."""
+        toggles = jnp.sum(self.switch <= t, axis=-1) % 2 == 1
+        return self.on ^ toggles
+
+    def drift(self, t) -> Float[Array, ""]:
+        """Global illumination factor at time ``t`` (s)."""
+        return 1.0 + self.drift_amplitude * jnp.sin(2.0 * jnp.pi * t / self.drift_period)
+
+
+class Sensor(eqx.Module):
+    """The omni camera's sensor: noise sigma (grey levels), vignetting, JPEG, sampling.
+
+    ``vignetting`` v darkens the image towards the rim as ``1 - v (r / rim)^2``.
+    ``antialias`` n renders people with n x n samples per pixel;
+    ``shadow_downsample`` s computes people's cast shadows on a grid s times
+    coarser than the image and interpolates it bilinearly (a soft penumbra).
+    ``jpeg_quality`` 0 means no JPEG compression.
+    """
+
+    noise_sigma: Float[Array, ""]
+    vignetting: Float[Array, ""]
+    jpeg_quality: int = eqx.field(static=True)
+    antialias: int = eqx.field(static=True)
+    shadow_downsample: int = eqx.field(static=True)
+
+
+class Scenario(eqx.Module):
+    """A whole synthetic-world scenario (the rig is separate: see :func:`parse_scenario`)."""
+
+    name: str = eqx.field(static=True)
+    fps: float = eqx.field(static=True)
+    seed: int = eqx.field(static=True)
+    height: Float[Array, ""]
+    floor: Surface
+    walls: Surface
+    ceiling: Float[Array, "3"]
+    skirting_colour: Float[Array, "3"]
+    skirting_height: Float[Array, ""]
+    furniture: Furniture
+    crowd: Crowd
+    lighting: Lighting
+    sensor: Sensor
+
+
+# --------------------------------------------------------------------------------------
+# TOML schema
+# --------------------------------------------------------------------------------------
+
+Pos = Annotated[float, Field(gt=0)]
+NonNeg = Annotated[float, Field(ge=0)]
+Unit = Annotated[float, Field(ge=0, le=1)]
+Colour = Annotated[list[Unit], Len(3, 3)]
+PosColour = Annotated[list[Annotated[float, Field(gt=0, le=1)]], Len(3, 3)]
+Point2 = Annotated[list[float], Len(2, 2)]
+Point3 = Annotated[list[float], Len(3, 3)]
+Range = Annotated[list[NonNeg], Len(2, 2)]
+
+#: Default clothing palette (linear RGB albedos): saturated, dark and light garments.
+CLOTHING = (
+    (0.60, 0.10, 0.10), (0.10, 0.20, 0.55), (0.12, 0.40, 0.15), (0.70, 0.60, 0.15),
+    (0.08, 0.08, 0.10), (0.75, 0.75, 0.72), (0.45, 0.20, 0.45), (0.20, 0.45, 0.55),
+    (0.50, 0.30, 0.15), (0.35, 0.35, 0.38),
+)
+SKIN = ((0.70, 0.50, 0.40), (0.55, 0.37, 0.28), (0.35, 0.22, 0.15), (0.80, 0.62, 0.52))
+HAIR = ((0.08, 0.06, 0.05), (0.30, 0.20, 0.10), (0.55, 0.45, 0.30), (0.45, 0.45, 0.45))
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+
+def _ordered(pair: list[float], key: str) -> None:
+    if pair[0] > pair[1]:
+        raise ValueError(f"{key} must be [low, high] with low <= high")
+
+
+class SurfaceSection(_Section):
+    colour: Colour = Field(description="mean albedo, linear RGB in [0, 1]")
+    tile: NonNeg = Field(0.0, description="tile edge, m; 0: no tiles")
+    grout: NonNeg = Field(0.006, description="width of the lines between tiles, m")
+    grout_colour: Colour | None = Field(None, description="albedo of the grout; default: 0.6 x colour")
+    tile_variation: Unit = Field(0.0, description="relative brightness spread between tiles")
+    texture: Unit = Field(0.0, description="relative amplitude of the fine texture")
+    texture_scale: Pos = Field(0.05, description="size of the fine texture's grain, m")
+
+
+class RoomSection(_Section):
+    height: Pos = Field(description="ceiling height, m (walls stand on the rig's room.outline)")
+    floor: SurfaceSection
+    walls: SurfaceSection
+    ceiling: Colour = [0.85, 0.85, 0.85]
+    skirting_colour: Colour = [0.25, 0.22, 0.20]
+    skirting_height: NonNeg = 0.08
+
+
+class FurnitureSection(_Section):
+    name: str = ""
+    corner_min: Point2 = Field(description="footprint corner with the smallest x and y, m")
+    corner_max: Point2 = Field(description="footprint corner with the largest x and y, m")
+    height: Pos
+    colour: Colour
+
+    @model_validator(mode="after")
+    def _box(self):
+        if not (self.corner_min[0] < self.corner_max[0] and self.corner_min[1] < self.corner_max[1]):
+            raise ValueError("corner_min must be below corner_max in both x and y")
+        return self
+
+
+class PeopleSection(_Section):
+    count: Annotated[int, Field(ge=0, le=64)]
+    speed: Range = Field([0.8, 1.4], description="preferred walking speed range, m/s")
+    pause_probability: Unit = 0.3
+    pause: Range = Field([1.0, 4.0], description="standing time range at a goal, s")
+    gap: NonNeg = Field(0.10, description="smallest distance kept between two people, m")
+    clothing: Annotated[list[Colour], Len(1)] = Field(default_factory=lambda: [list(c) for c in CLOTHING])
+    skin: Annotated[list[Colour], Len(1)] = Field(default_factory=lambda: [list(c) for c in SKIN])
+    hair: Annotated[list[Colour], Len(1)] = Field(default_factory=lambda: [list(c) for c in HAIR])
+    floor_like: Unit = Field(0.0, description="share of people dressed close to the floor's colour")
+
+    @model_validator(mode="after")
+    def _ranges(self):
+        _ordered(self.speed, "speed")
+        _ordered(self.pause, "pause")
+        if self.speed[0] <= 0:
+            raise ValueError("speed must be positive")
+        return self
+
+
+class LampSection(_Section):
+    position: Point3 = Field(description="lamp position x, y, z in m (world frame)")
+    intensity: NonNeg = Field(description="grey level of a white surface 1 m away, facing the lamp")
+    on: bool = Field(True, description="on at t = 0")
+    switch: list[NonNeg] = Field(default_factory=list, description="times (s) at which the lamp toggles")
+
+    @model_validator(mode="after")
+    def _times(self):
+        if any(b <= a for a, b in zip(self.switch, self.switch[1:])):
+            raise ValueError("switch times must increase strictly")
+        return self
+
+
+class DriftSection(_Section):
+    amplitude: Annotated[float, Field(ge=0, lt=1)] = 0.0
+    period: Pos = Field(60.0, description="period of the drift, s")
+
+
+class LightingSection(_Section):
+    spectrum: PosColour = Field(description="RGB of the one spectrum all lamps and the ambient share")
+    ambient: NonNeg
+    drift: DriftSection = DriftSection()
+    lamps: list[LampSection] = Field(default_factory=list)
+
+
+class SensorSection(_Section):
+    noise_sigma: NonNeg | None = Field(None, description="grey levels; default: the rig's detection.sensor_sigma")
+    vignetting: Annotated[float, Field(ge=0, lt=1)] = 0.0
+    jpeg_quality: Annotated[int, Field(ge=1, le=100)] | None = None
+    antialias: Annotated[int, Field(ge=1, le=4)] = 2
+    shadow_downsample: Annotated[int, Field(ge=1, le=8)] = 4
+
+
+class ScenarioFile(_Section):
+    name: str
+    rig: str = Field(description="rig TOML file, relative to this scenario file")
+    fps: Pos = 25.0
+    seed: Annotated[int, Field(ge=0)] = 0
+    room: RoomSection
+    furniture: list[FurnitureSection] = Field(default_factory=list)
+    people: PeopleSection
+    lighting: LightingSection
+    sensor: SensorSection = SensorSection()
+
+
+def read_scenario_header(data: Mapping[str, Any], *, source: str = "scenario") -> ScenarioFile:
+    """Validate a parsed scenario mapping against the schema (rig not yet needed)."""
+    try:
+        return ScenarioFile.model_validate(dict(data))
+    except pydantic.ValidationError as exc:
+        raise ConfigError(_one_line(exc, source)) from None
+
+
+# --------------------------------------------------------------------------------------
+# Mapping + rig -> Scenario
+# --------------------------------------------------------------------------------------
+
+
+def _a(x) -> Array:
+    return jnp.asarray(x, dtype=float)
+
+
+def _surface(sec: SurfaceSection) -> Surface:
+    grout = sec.grout_colour if sec.grout_colour is not None else [0.6 * c for c in sec.colour]
+    return Surface(
+        colour=_a(sec.colour), tile=_a(sec.tile), grout=_a(sec.grout), grout_colour=_a(grout),
+        tile_variation=_a(sec.tile_variation), texture=_a(sec.texture), texture_scale=_a(sec.texture_scale),
+    )
+
+
+def _check_against_rig(f: ScenarioFile, rig: Rig, source: str) -> None:
+    def fail(key: str, msg: str):
+        raise ConfigError(f"{source}: {key}: {msg}")
+
+    H_o = float(rig.omni.H_o)
+    if f.room.height <= H_o:
+        fail("room.height", f"{f.room.height} m must be above the omni camera (omni.H_o = {H_o} m)")
+    outline = rig.room.outline
+    tallest = float(rig.person.H_p + 4 * rig.sigmas.H_p)
+    for i, lamp in enumerate(f.lighting.lamps):
+        x, y, z = lamp.position
+        if not bool(_in_polygon(outline, x, y)):
+            fail(f"lighting.lamps.{i}.position", f"({x}, {y}) is outside the rig's room.outline")
+        if not tallest < z < f.room.height:
+            fail(f"lighting.lamps.{i}.position",
+                 f"z = {z} m must lie between the tallest person ({tallest:.2f} m) and the ceiling ({f.room.height} m)")
+    for i, box in enumerate(f.furniture):
+        (x0, y0), (x1, y1) = box.corner_min, box.corner_max
+        e = 1e-3  # boxes may touch the walls
+        corners = np.array([[x0 + e, y0 + e], [x1 - e, y1 - e], [x0 + e, y1 - e], [x1 - e, y0 + e]])
+        if not bool(np.all(_in_polygon(outline, corners[:, 0], corners[:, 1]))):
+            fail(f"furniture.{i}", "the box must stand inside the rig's room.outline")
+        if box.height >= f.room.height:
+            fail(f"furniture.{i}.height", f"{box.height} m must be below room.height = {f.room.height} m")
+
+
+def parse_scenario(data: Mapping[str, Any], rig: Rig, *, source: str = "scenario") -> Scenario:
+    """Validate a parsed scenario mapping (its ``rig`` already loaded) and build :class:`Scenario`.
+
+    Raises :class:`ConfigError` with one line naming the key and what was expected.
+    """
+    f = read_scenario_header(data, source=source)
+    _check_against_rig(f, rig, source)
+    furn = f.furniture
+    furniture = Furniture(
+        lo=_a(np.reshape([b.corner_min for b in furn], (-1, 2))),
+        hi=_a(np.reshape([b.corner_max for b in furn], (-1, 2))),
+        height=_a([b.height for b in furn]),
+        colour=_a(np.reshape([b.colour for b in furn], (-1, 3))),
+    )
+    pe = f.people
+    crowd = Crowd(
+        count=pe.count, speed=_a(pe.speed), pause_probability=_a(pe.pause_probability), pause=_a(pe.pause),
+        gap=_a(pe.gap), clothing=_a(pe.clothing), skin=_a(pe.skin), hair=_a(pe.hair),
+        floor_like=_a(pe.floor_like),
+    )
+    li = f.lighting
+    n_switch = max([len(lamp.switch) for lamp in li.lamps] + [1])
+    switch = np.full((len(li.lamps), n_switch), np.inf)
+    for i, lamp in enumerate(li.lamps):
+        switch[i, : len(lamp.switch)] = lamp.switch
+    lighting = Lighting(
+        spectrum=_a(li.spectrum), ambient=_a(li.ambient),
+        position=_a(np.reshape([lamp.position for lamp in li.lamps], (-1, 3))),
+        intensity=_a([lamp.intensity for lamp in li.lamps]),
+        on=jnp.asarray([lamp.on for lamp in li.lamps], dtype=bool),
+        switch=_a(switch), drift_amplitude=_a(li.drift.amplitude), drift_period=_a(li.drift.period),
+    )
+    se = f.sensor
+    sigma = float(rig.detection.sensor_sigma) if se.noise_sigma is None else se.noise_sigma
+    sensor = Sensor(
+        noise_sigma=_a(sigma), vignetting=_a(se.vignetting), jpeg_quality=se.jpeg_quality or 0,
+        antialias=se.antialias, shadow_downsample=se.shadow_downsample,
+    )
+    ro = f.room
+    return Scenario(
+        name=f.name, fps=float(f.fps), seed=int(f.seed), height=_a(ro.height), floor=_surface(ro.floor),
+        walls=_surface(ro.walls), ceiling=_a(ro.ceiling), skirting_colour=_a(ro.skirting_colour),
+        skirting_height=_a(ro.skirting_height), furniture=furniture, crowd=crowd, lighting=lighting,
+        sensor=sensor,
+    )

@@ -1,0 +1,1 @@
+"""Calibration runs around the kernels of ``omnijax.calibration``: observation files, checks, outputs, plots."""

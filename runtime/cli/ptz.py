@@ -1,0 +1,100 @@
+"""``omnijax ptz``: send one target to a PTZ camera, or ask where it is (for installers)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+HELP = "send one pan/tilt/zoom to a PTZ camera, or ask where it is"
+DESCRIPTION = """\
+Connect to a PTZ camera over a pyserial URL (/dev/ttyUSB0, socket://host:port,
+or the path printed by `omnijax ptz-emulator`), optionally send one target in
+omnijax's frame (pan from the direction of the omni camera's axis, tilt up
+positive, degrees; zoom factor) through the device profile's mounting and
+limits, wait until the camera reports it reached it, and print where it is:
+in omnijax's frame and in the device's own degrees and units. Use it to check
+a profile's [mounting] section: `--pan-deg 0 --tilt-deg 0` must point the
+camera at the omni camera's axis, level.
+
+Exit codes: 0 done (and reached, if a target was sent), 1 no camera or target
+not reached in time, 2 bad arguments or profile.
+"""
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("ptz", help=HELP, description=DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--port", required=True, metavar="URL", help="pyserial URL of the camera's serial line")
+    p.add_argument("--profile", metavar="P",
+                   help="device profile: a TOML file or a name in configs/devices (default: per --protocol)")
+    p.add_argument("--protocol", choices=("visca", "pelco-d"), default="visca",
+                   help="shipped profile to use when --profile is not given (default visca)")
+    p.add_argument("--pan-deg", type=float, metavar="DEG", help="target pan, omnijax frame (deg)")
+    p.add_argument("--tilt-deg", type=float, metavar="DEG", help="target tilt, omnijax frame (deg, up positive)")
+    p.add_argument("--zoom", type=float, metavar="Z", help="target zoom factor")
+    p.add_argument("--wait", type=float, default=15.0, metavar="S",
+                   help="seconds to wait for the camera to reach the target (default 15)")
+    p.add_argument("--timeout", type=float, default=5.0, metavar="S",
+                   help="seconds to wait for the camera to answer when connecting (default 5)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from runtime.errors import UsageError
+    from runtime.output import dumps
+    from runtime.ptz import ProfileError, PtzDriver, PtzError, default_profile, load_profile
+
+    try:
+        profile = load_profile(args.profile) if args.profile else default_profile(args.protocol)
+    except ProfileError as exc:
+        raise UsageError(str(exc)) from None
+    given = [v is not None for v in (args.pan_deg, args.tilt_deg, args.zoom)]
+    if any(given) and not all(given):
+        raise UsageError("--pan-deg, --tilt-deg, --zoom: give all three, or none to only ask the position")
+    if all(given) and not all(math.isfinite(v) for v in (args.pan_deg, args.tilt_deg, args.zoom)):
+        raise UsageError("--pan-deg, --tilt-deg, --zoom: expected finite numbers")
+    for flag, value in (("--wait", args.wait), ("--timeout", args.timeout)):
+        if not value > 0:
+            raise UsageError(f"{flag}: expected a positive number of seconds, got {value}")
+
+    report: dict = {"port": args.port, "profile": profile.name, "protocol": profile.protocol}
+    driver = PtzDriver(args.port, profile)
+    try:
+        driver.connect(timeout=args.timeout)
+    except PtzError as exc:
+        print(f"omnijax ptz: {exc}", file=sys.stderr)
+        return 1
+    try:
+        reached = True
+        if all(given):
+            t = driver.set_target(math.radians(args.pan_deg), math.radians(args.tilt_deg), args.zoom)
+            reached = driver.wait_reached(args.wait)
+            report["target"] = {"pan_deg": args.pan_deg, "tilt_deg": args.tilt_deg, "zoom": args.zoom,
+                                "units": {"pan": t.pan, "tilt": t.tilt, "zoom": t.zoom}, "clamped": list(t.clamped)}
+            report["reached"] = reached
+        pos = driver.query_position()
+    except (PtzError, TimeoutError) as exc:
+        print(f"omnijax ptz: {args.port}: {exc or 'no answer'}", file=sys.stderr)
+        return 1
+    finally:
+        driver.disconnect()
+    pan_u, tilt_u, zoom_u = pos.units
+    report["position"] = {
+        "pan_deg": pos.pan_deg, "tilt_deg": pos.tilt_deg, "zoom": pos.zoom,
+        "device": {"pan_deg": pan_u / profile.pan.units_per_deg, "tilt_deg": tilt_u / profile.tilt.units_per_deg},
+        "units": {"pan": pan_u, "tilt": tilt_u, "zoom": zoom_u},
+    }
+    report["ptz"] = driver.counters
+    if args.json:
+        print(dumps(report))
+    else:
+        p = report["position"]
+        print(f"{profile.name} on {args.port}: pan {p['pan_deg']:.2f} deg, tilt {p['tilt_deg']:.2f} deg, "
+              f"zoom {p['zoom']:.2f}x (device: pan {p['device']['pan_deg']:.2f} deg, "
+              f"tilt {p['device']['tilt_deg']:.2f} deg, units {pan_u} {tilt_u} {zoom_u})")
+        if "target" in report:
+            clamped = f", clamped on {', '.join(t.clamped)}" if t.clamped else ""
+            print(f"target {'reached' if reached else 'NOT reached'} within {args.wait:g} s{clamped}")
+    return 0 if reached else 1

@@ -1,0 +1,76 @@
+"""``omnijax ptz-emulator``: a VISCA or Pelco-D camera on a pseudo-terminal (DESIGN.md section 7)."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from pathlib import Path
+
+HELP = "a VISCA or Pelco-D camera on a pseudo-terminal, for tests, demos and trying a set-up"
+DESCRIPTION = """\
+Open a pseudo-terminal, print its device path as the first line on stdout, and
+behave like a PTZ camera on it until killed (SIGTERM or Ctrl-C exit cleanly):
+slew-rate-limited motion from the device profile, position inquiries, ACK and
+completion replies, and error replies to bad packets (VISCA: message length,
+syntax, buffer full, cancelled, no socket, not executable; Pelco-D ignores and
+counts bad packets). Point anything that speaks pyserial at the printed path.
+
+--state-file F keeps F updated (atomically) with a JSON object: pan_deg,
+tilt_deg (the device's own angles), zoom (magnification), commands, errors,
+and more (units, moving, geometry {pan_deg, tilt_deg} in omnijax's frame).
+--link PATH keeps a symlink PATH pointing at the pty, so that a client can
+reopen the same path after the emulator is restarted.
+"""
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("ptz-emulator", help=HELP, description=DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--protocol", required=True, choices=("visca", "pelco-d"))
+    p.add_argument("--address", type=int, metavar="N",
+                   help="camera address (VISCA: place on the chain, 1-7; Pelco-D: 1-255); default: the profile's")
+    p.add_argument("--profile", metavar="P",
+                   help="device profile: a TOML file or a name in configs/devices "
+                        "(default: sony_evi_d70 for visca, pelco_d_dome for pelco-d)")
+    p.add_argument("--state-file", metavar="F", help="keep F updated with the camera's state (JSON)")
+    p.add_argument("--link", metavar="PATH", help="keep a symlink PATH pointing at the pty")
+    p.add_argument("--faults", default="", metavar="SPEC",
+                   help="inject faults per reply, e.g. 'garble=0.05,drop=0.01,noise=0.05,buffer_full=0.1'")
+    p.add_argument("--seed", type=int, default=0, help="seed of the injected faults (default 0)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from runtime.errors import UsageError
+    from runtime.ptz import Faults, ProfileError, PtyEmulator, default_profile, load_profile
+
+    try:
+        profile = load_profile(args.profile) if args.profile else default_profile(args.protocol)
+    except ProfileError as exc:
+        raise UsageError(str(exc)) from None
+    if profile.protocol != args.protocol:
+        raise UsageError(f"--profile: {args.profile} is a {profile.protocol} profile, not {args.protocol}")
+    top = 7 if args.protocol == "visca" else 255
+    if args.address is not None and not 1 <= args.address <= top:
+        raise UsageError(f"--address: expected 1-{top} for {args.protocol}, got {args.address}")
+    try:
+        faults = Faults.parse(args.faults)
+    except ValueError as exc:
+        raise UsageError(f"--faults: {exc}") from None
+    for flag, value in (("--state-file", args.state_file), ("--link", args.link)):
+        if value is not None and not Path(value).parent.is_dir():
+            raise UsageError(f"{flag}: no such directory: {Path(value).parent}")
+
+    emulator = PtyEmulator(profile, args.address, state_file=args.state_file, link=args.link,
+                           faults=faults, seed=args.seed)
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: emulator.stop())
+    print(emulator.path, flush=True)
+    print(f"omnijax ptz-emulator: {profile.name} ({profile.protocol}, address {emulator.camera.address}) on "
+          f"{emulator.path}" + (f", linked from {args.link}" if args.link else ""), file=sys.stderr, flush=True)
+    try:
+        emulator.serve()
+    finally:
+        emulator.close()
+    return 0

@@ -1,0 +1,166 @@
+"""``omnijax run``: the real-time loop on a camera, a video file or an image folder, steering a PTZ."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+HELP = "track people with the omni camera (device, video or image folder) and steer the PTZ onto their heads"
+DESCRIPTION = """\
+SOURCE is a camera index (0, 1, ...), a video file or a folder of images. A capture
+thread keeps only the newest frame (late frames are dropped and counted). The
+background is learnt from the first frames; then, per frame: detection (jitted),
+tracking (Kalman with optimal assignment, or the paper's nearest neighbour), the
+target (round-robin with a dwell time, people whose face was not yet captured
+first; or a single person), the head predicted to when the PTZ will get there,
+pan/tilt/zoom with the propagated uncertainty (tracking and latency included),
+and the command written to the PTZ unless it is inside the dead zone.
+
+--ptz is a pyserial URL (/dev/ttyUSB0, socket://host:port, or the path printed by
+`omnijax ptz-emulator`); without it commands are computed and logged only.
+Ctrl-C or SIGTERM: the PTZ goes home, the summary is written, nothing is lost.
+
+Writes DIR/summary.json (DESIGN.md section 7), DIR/log.jsonl (one line per frame)
+and DIR/annotated.mp4 (the operator's view; --no-video to skip it).
+"""
+
+
+def add_loop_options(p: argparse.ArgumentParser) -> None:
+    """Options shared by ``run`` and ``demo``."""
+    p.add_argument("--zoom-rule", choices=("calibrated", "paper"), default="calibrated",
+                   help="zoom rule that drives the PTZ (default calibrated; both are logged)")
+    p.add_argument("--tracker", choices=("kalman", "nearest"), default="kalman",
+                   help="kalman: constant velocity with optimal assignment (default); nearest: the paper's")
+    p.add_argument("--target", choices=("round-robin", "single"), default="round-robin",
+                   help="round-robin over people with a dwell time (default), or follow one person")
+    p.add_argument("--dwell", type=float, default=2.0, metavar="S", help="seconds on each face once reached (2)")
+    p.add_argument("--dead-zone", type=float, default=1.0, metavar="K",
+                   help="send a new pan/tilt only when it moves by more than K sigma (default 1)")
+    p.add_argument("--max-seconds", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument("--max-frames", type=int, metavar="N", help="stop after N processed frames")
+    p.add_argument("--faults", default="", metavar="SPEC",
+                   help="inject faults, e.g. 'broken@300,wrong-size@350,end@900' (see --help of demo)")
+    p.add_argument("--no-video", action="store_true", help="do not draw or write the annotated video")
+    p.add_argument("--record", action="store_true",
+                   help="also write the omni frames as processed to DIR/omni.avi (to replay with `omnijax run`)")
+    p.add_argument("--quiet", action="store_true", help="no live status line")
+    p.add_argument("--cache-dir", metavar="DIR", default=None,
+                   help="JAX compilation cache (default: $XDG_CACHE_HOME/omnijax/xla or ~/.cache/omnijax/xla)")
+    p.add_argument("--no-cache", action="store_true", help="compile everything afresh, cache nothing")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("run", help=HELP, description=DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("source", metavar="SOURCE", help="camera index, video file or folder of images")
+    p.add_argument("--config", required=True, metavar="FILE", help="rig TOML file")
+    p.add_argument("--ptz", metavar="URL", help="PTZ serial port (pyserial URL); none: commands are only logged")
+    p.add_argument("--profile", metavar="P",
+                   help="PTZ device profile: TOML file or a name in configs/devices (default sony_evi_d70)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
+    p.add_argument("--pace", choices=("live", "all"),
+                   help="live: frames at the source's rate, late ones dropped; all: every frame as fast as "
+                        "possible (default: live for cameras and videos, all for image folders)")
+    p.add_argument("--fps", type=float, metavar="F", help="frame rate of an image folder")
+    p.add_argument("--background-frames", type=int, metavar="N",
+                   help="frames to learn the background from (default: [detection] background_frames)")
+    p.add_argument("--background-step", type=int, default=1, metavar="K",
+                   help="learn from every K-th frame (default 1); spacing them out keeps people who pause "
+                        "out of the background")
+    add_loop_options(p)
+    p.set_defaults(func=run)
+
+
+def check_loop_options(args) -> None:
+    """Check the shared options, and turn on the compilation cache (later starts compile less)."""
+    from runtime.errors import UsageError
+    from runtime.cli.optimise import _enable_cache
+
+    if args.dwell < 0:
+        raise UsageError(f"--dwell: expected seconds >= 0, got {args.dwell}")
+    if not args.dead_zone >= 0:
+        raise UsageError(f"--dead-zone: expected a number of sigmas >= 0, got {args.dead_zone}")
+    if args.max_seconds is not None and not args.max_seconds > 0:
+        raise UsageError(f"--max-seconds: expected seconds > 0, got {args.max_seconds}")
+    if args.max_frames is not None and args.max_frames < 1:
+        raise UsageError(f"--max-frames: expected a positive count, got {args.max_frames}")
+    _enable_cache(args)
+
+
+def parse_faults(text: str, ptz_unplug: bool = True):
+    from runtime.errors import UsageError
+    from runtime.realtime.faults import FaultPlan
+
+    try:
+        plan = FaultPlan.parse(text)
+    except ValueError as exc:
+        raise UsageError(f"--faults: {exc}") from None
+    if plan.ptz_unplug and not ptz_unplug:
+        raise UsageError("--faults: ptz-unplug needs the emulated PTZ of `omnijax demo` (unplug a real one by hand)")
+    return plan
+
+
+def loop_config(args):
+    from runtime.realtime.loop import LoopConfig
+
+    return LoopConfig(zoom_rule=args.zoom_rule, tracker=args.tracker, target=args.target, dwell_s=args.dwell,
+                      dead_zone_sd=args.dead_zone, max_frames=args.max_frames, max_seconds=args.max_seconds,
+                      quiet=args.quiet)
+
+
+def run(args: argparse.Namespace) -> int:
+    from runtime.errors import UsageError
+
+    check_loop_options(args)
+    plan = parse_faults(args.faults, ptz_unplug=False)
+    if args.fps is not None and not args.fps > 0:
+        raise UsageError(f"--fps: expected frames per second > 0, got {args.fps}")
+    if args.background_frames is not None and args.background_frames < 3:
+        raise UsageError(f"--background-frames: expected at least 3, got {args.background_frames}")
+    if args.background_step < 1:
+        raise UsageError(f"--background-step: expected a positive count, got {args.background_step}")
+
+    from runtime.files import load_rig
+    from runtime.frames import SourceError
+    from runtime.ptz import ProfileError, PtzDriver, PtzError, load_profile
+    from runtime.realtime.session import run_session
+    from runtime.realtime.sources import FaultySource, FolderSource, open_source
+
+    rig = load_rig(args.config)
+    try:
+        profile = load_profile(args.profile or "sony_evi_d70")
+    except ProfileError as exc:
+        raise UsageError(str(exc)) from None
+    try:
+        source = open_source(args.source, args.fps)
+    except SourceError as exc:
+        raise UsageError(str(exc)) from None
+    if not plan.empty:
+        source = FaultySource(source, plan)
+    pace = args.pace or ("all" if isinstance(source, FolderSource) and args.fps is None else "live")
+    driver = None
+    if args.ptz:
+        driver = PtzDriver(args.ptz, profile)
+        try:
+            driver.connect(timeout=5)
+        except PtzError as exc:
+            source.close()
+            raise UsageError(f"--ptz: {exc}") from None
+    try:
+        summary = run_session(rig, source, Path(args.out), driver=driver, profile=profile, config=loop_config(args),
+                              paced=pace == "live", background_frames=args.background_frames,
+                              background_step=args.background_step,
+                              video=not args.no_video, record=args.record, title=f"OMNI  {Path(str(args.source)).name}",
+                              extra={"config_file": str(args.config), "ptz_url": args.ptz, "pace": pace,
+                                     "faults_injected": plan.describe()})
+    except SourceError as exc:
+        raise UsageError(str(exc)) from None
+    finally:
+        if driver is not None:
+            driver.disconnect()
+    lat, p = summary["latency_ms"], summary["ptz"]
+    print(f"{summary['frames']} frames at {summary['fps']:.1f} fps ({summary['stop_reason']}); latency p50 "
+          f"{lat['p50'] or float('nan'):.2f} ms, p99 {lat['p99'] or float('nan'):.2f} ms; PTZ {p['commands']} commands, "
+          f"{p['errors']} errors, {p['reconnects']} reconnects; wrote {args.out}", file=sys.stdout)
+    return 0

@@ -1,0 +1,61 @@
+"""Reading rig and scenario files from disk: the only place TOML and referenced files are read."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+from omnijax import ConfigError, Rig, parse_rig
+from omnijax.world import Scenario, parse_scenario, read_scenario_header
+
+
+def read_toml(path: str | Path) -> dict:
+    """Parse a TOML file; a missing or malformed file is a one-line :class:`ConfigError`."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such config file") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a directory, expected a TOML config file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+
+
+def load_rig(path: str | Path, overrides: dict[str, dict] | None = None) -> Rig:
+    """Load and validate a rig file; files it names are read relative to it.
+
+    ``overrides`` ({section: {key: value}}, e.g. from command-line flags) replace
+    the file's keys before validation, so they are checked like the file's own
+    and a bad one is named by its dotted key ("... (with command-line overrides)").
+    """
+    path = Path(path)
+    base = path.parent
+
+    def read_text(name: str) -> str:
+        return (base / name).read_text()
+
+    data = read_toml(path)
+    source = str(path)
+    if overrides:
+        for section, keys in overrides.items():
+            if keys:
+                data[section] = {**data.get(section, {}), **keys}
+                source = f"{path} (with command-line overrides)"
+    return parse_rig(data, source=source, read_text=read_text)
+
+
+def load_scenario(path: str | Path, rig_overrides: dict[str, dict] | None = None) -> tuple[Rig, Scenario]:
+    """Load and validate a scenario file and the rig file it names (relative to the scenario).
+
+    ``rig_overrides`` replace keys of the rig file as in :func:`load_rig`.
+    """
+    path = Path(path)
+    data = read_toml(path)
+    header = read_scenario_header(data, source=str(path))
+    rig_path = path.parent / header.rig
+    if not rig_path.is_file():
+        raise ConfigError(f"{path}: rig: no such rig file {str(rig_path)!r}")
+    rig = load_rig(rig_path, rig_overrides)
+    return rig, parse_scenario(data, rig, source=str(path))

@@ -1,0 +1,1 @@
+"""Figures of the layout search (``omnijax optimise``)."""

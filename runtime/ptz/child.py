@@ -1,0 +1,84 @@
+"""The PTZ emulator as a child process on a pseudo-terminal, for the demo and the tests.
+
+:class:`EmulatorProcess` runs ``omnijax ptz-emulator`` with ``--link`` (a stable path that
+follows the pty) and ``--state-file``; the driver opens the link. :meth:`unplug` kills the
+emulator, so the port vanishes as when a USB adapter is pulled, and starts a new one on the
+same link after a delay, as when it is plugged back in.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tempfile
+import threading
+from pathlib import Path
+
+from runtime.realtime.session import read_state
+
+
+class EmulatorProcess:
+    """``omnijax ptz-emulator`` in a child process (see the module docstring)."""
+
+    def __init__(self, protocol: str = "visca", profile: str | None = None, folder: Path | None = None):
+        self._tmp = None
+        if folder is None:
+            self._tmp = tempfile.TemporaryDirectory(prefix="omnijax-ptz-")
+            folder = Path(self._tmp.name)
+        self.folder = Path(folder)
+        self.link = self.folder / "ptz"
+        self.state_file = self.folder / "ptz-state.json"
+        self.protocol, self.profile = protocol, profile
+        self.proc: subprocess.Popen | None = None
+        self.unplugs = 0
+        self._timer: threading.Timer | None = None
+        self._lock = threading.Lock()
+
+    def start(self) -> EmulatorProcess:
+        """Start the emulator and wait for its pty (first line on its stdout)."""
+        cmd = [sys.executable, "-m", "runtime.cli", "ptz-emulator", "--protocol", self.protocol,
+               "--link", str(self.link), "--state-file", str(self.state_file)]
+        if self.profile:
+            cmd += ["--profile", self.profile]
+        with self._lock:
+            self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                                         cwd=Path(__file__).resolve().parents[2])
+            line = self.proc.stdout.readline().strip()
+        if not line:
+            raise RuntimeError(f"the PTZ emulator did not start (exit code {self.proc.poll()})")
+        self.pty = line
+        return self
+
+    def state(self) -> dict | None:
+        """The emulated camera's state (``--state-file``)."""
+        return read_state(self.state_file)
+
+    def kill(self) -> None:
+        """Stop the emulator: its pty and link vanish."""
+        with self._lock:
+            if self.proc is not None and self.proc.poll() is None:
+                self.proc.terminate()
+                self.proc.wait(5)
+            self.proc = None
+
+    def unplug(self, seconds: float) -> None:
+        """Kill the emulator now and start a new one on the same link after ``seconds`` (in a thread)."""
+        self.kill()
+        self.unplugs += 1
+        self._timer = threading.Timer(seconds, self.start)
+        self._timer.daemon = True
+        self._timer.start()
+
+    def close(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer.join()
+        self.kill()
+        if self._tmp is not None:
+            self._tmp.cleanup()
+
+    def __enter__(self) -> EmulatorProcess:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.close()

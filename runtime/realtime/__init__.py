@@ -1,0 +1,1 @@
+"""The real-time room: frame sources and capture, the tracker, target choice, the loop, overlays, faults."""

@@ -1,0 +1,489 @@
+"""The real-time loop: frame -> detection -> tracks -> target -> predicted head -> pan/tilt/zoom -> PTZ.
+
+Per frame (each stage timed):
+
+1. ``capture``: the newest frame from the :class:`~runtime.sources.Capture` (stale frames are
+   rejected there, broken and wrong-size frames are counted here and skipped);
+2. ``detect``: the jitted detector and the detections' floor positions (one compiled call);
+3. ``track``: the Kalman (or nearest-neighbour) tracker;
+4. ``aim``: the target chosen, its head predicted to when the PTZ will get there (tracking and
+   latency uncertainty included), pan/tilt, their covariance and the zoom of both rules (jitted);
+5. ``send``: the PTZ command through the driver, unless it falls in the dead-zone;
+6. afterwards, off the latency path: the hooks (``draw``: the annotated frame, the demo's
+   scoring), the log line, the background update.
+
+The loop keeps going through faults (the source ends, a broken frame, a frame of the wrong
+size, the PTZ port vanishing and returning) and counts each; on Ctrl-C or SIGTERM it sends
+the PTZ home, writes the summary and closes the outputs.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from omnijax import (
+    INPUT_NAMES,
+    Detector,
+    Rig,
+    adapt_background,
+    choose_zoom,
+    detect,
+    line_background,
+    pointing,
+    pointing_covariance_full,
+    sector_mask,
+)
+from omnijax.geometry import floor_measurement, image_position
+from runtime.realtime.sources import Capture, Frame
+from runtime.realtime.targeting import TargetSelector, outside_dead_zone
+from runtime.realtime.tracker import Tracker
+
+STAGES = ("capture", "detect", "track", "aim", "send", "log", "draw", "adapt")
+
+
+class Aimed(eqx.Module):
+    """The jitted aim's output: pointing, its covariance, and both rules' zoom."""
+
+    pan: jax.Array
+    tilt: jax.Array
+    slant: jax.Array
+    valid: jax.Array
+    cov: jax.Array
+    zoom: jax.Array  # (2,): paper, calibrated
+    fov_h: jax.Array
+    fov_v: jax.Array
+    probability: jax.Array
+    r_f: jax.Array
+    theta_f: jax.Array
+    cov_rt: jax.Array
+
+
+RULES = ("paper", "calibrated")
+
+
+@jax.jit
+def perceive(detector: Detector, rig: Rig, frame, bg, lines):
+    """Detection (steps 1-6) and the detections' floor positions with covariances.
+
+    The detector's sigmas cover the profile's noise only (sigma_r_f is 0 for a clear person);
+    the rig's ``[detection]`` sigmas are their floor, for what the foot model misses.
+    """
+    dets, trace = detect(detector, frame, bg, lines)
+    d = rig.detection
+    z, R = floor_measurement(rig, dets.r_f, dets.theta_f, jnp.maximum(dets.sigma_r_f, d.sigma_r_f),
+                             jnp.maximum(dets.sigma_theta_f, d.sigma_theta_f))
+    return dets, trace, z, R
+
+
+@jax.jit
+def update_background(detector: Detector, bg, frame, theta_map, dets, rate):
+    """The background adapted where no person's sector is (``rate`` per call), and its polar lines."""
+    bg = adapt_background(bg, frame, ~sector_mask(theta_map, dets), rate)
+    return bg, line_background(detector, bg)
+
+
+@jax.jit
+def aim_at_floor(rig: Rig, xy, cov_xy) -> Aimed:
+    """Pan/tilt/zoom at the head above floor point ``xy`` whose covariance is ``cov_xy`` (2 x 2).
+
+    The floor estimate goes back to the image as (r_f, theta_f) with a full covariance, joins
+    the rig's calibration sigmas, and ``J Sigma J^T`` (autodiff) gives the pointing covariance.
+    """
+    rt, crt = image_position(rig, xy, cov_xy)
+    x = rig.input_mean(rt[0], rt[1])
+    sig = rig.input_sigma(0.0, 0.0)
+    cov9 = jnp.diag(sig**2).at[:2, :2].set(crt)
+    pc = pointing_covariance_full(x, cov9, rig.omni.profile)
+    p = pointing(x, rig.omni.profile)
+    choices = [choose_zoom(rig.foveal.lens, rule, pc.cov, p.distance, p.tilt, p.slant, rig.person.R_h,
+                           rig.p_contain) for rule in RULES]
+    return Aimed(
+        pan=p.pan, tilt=p.tilt, slant=p.slant, valid=p.valid, cov=pc.cov,
+        zoom=jnp.stack([c.zoom for c in choices]), fov_h=jnp.stack([c.fov_h for c in choices]),
+        fov_v=jnp.stack([c.fov_v for c in choices]), probability=jnp.stack([c.probability for c in choices]),
+        r_f=rt[0], theta_f=rt[1], cov_rt=crt,
+    )
+
+
+@dataclass
+class Command:
+    """What was (or would have been) sent for a frame."""
+
+    track: int
+    pan: float
+    tilt: float
+    zoom: float
+    zooms: dict[str, float]
+    sd_pan: float
+    sd_tilt: float
+    sent: bool
+    t_predicted: float
+    aimed: Aimed | None = None
+    floor_sd: np.ndarray | None = None  # sd of the predicted floor position (X, Y), m
+
+
+@dataclass
+class LoopConfig:
+    """Settings of :class:`RealTimeLoop` (command-line flags)."""
+
+    zoom_rule: str = "calibrated"
+    tracker: str = "kalman"
+    target: str = "round-robin"
+    dwell_s: float = 2.0
+    dead_zone_sd: float = 1.0
+    adapt_every: int = 2
+    home: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    status_every_s: float = 0.5
+    max_frames: int | None = None
+    max_seconds: float | None = None
+    quiet: bool = False
+
+
+class Samples:
+    """The latest ``capacity`` values of a measurement in a preallocated ring buffer (memory stays
+    flat however long the loop runs); statistics are over those."""
+
+    def __init__(self, capacity: int = 65536):
+        self._buf = np.full(capacity, np.nan)  # touched now, so resident memory does not creep up
+        self.count = 0
+
+    def append(self, v: float) -> None:
+        self._buf[self.count % self._buf.size] = v
+        self.count += 1
+
+    def values(self) -> np.ndarray:
+        return self._buf[: min(self.count, self._buf.size)]
+
+    def recent(self, n: int) -> np.ndarray:
+        """The last ``n`` values (fewer at the start)."""
+        idx = np.arange(max(self.count - min(n, self._buf.size), 0), self.count) % self._buf.size
+        return self._buf[idx]
+
+    def __len__(self) -> int:
+        return self.count
+
+
+@dataclass
+class Timings:
+    """Per-stage and end-to-end times (ms)."""
+
+    stages: dict[str, Samples] = field(default_factory=lambda: {s: Samples() for s in STAGES})
+    latency: Samples = field(default_factory=Samples)  # frame available -> PTZ bytes written (driver's stamps)
+    compute: Samples = field(default_factory=Samples)  # frame available -> command handed to the driver
+    frame: Samples = field(default_factory=Samples)
+
+    @staticmethod
+    def stats(samples: Samples) -> dict:
+        a = samples.values()
+        if not a.size:
+            return {"p50": None, "p99": None, "n": 0}
+        return {"p50": float(np.median(a)), "p90": float(np.percentile(a, 90)),
+                "p99": float(np.percentile(a, 99)), "max": float(a.max()), "n": int(samples.count)}
+
+
+class RealTimeLoop:
+    """Runs detection, tracking and PTZ control over a :class:`Capture` (see the module docstring).
+
+    Hooks: ``on_frame(record, frame, dets, z, tracks, command)`` after each processed frame, with
+    ``z`` the valid detections' floor positions (K, 2) m (the demo scores there and the annotated
+    view is drawn there), returning extra log fields;
+    ``driver`` may be ``None`` (no PTZ: commands are computed and logged only).
+    """
+
+    def __init__(self, rig: Rig, detector: Detector, background, capture: Capture, driver, profile,
+                 config: LoopConfig, log_path: Path, on_frame: Callable | None = None):
+        self.rig, self.detector, self.capture = rig, detector, capture
+        self.driver, self.profile, self.cfg = driver, profile, config
+        self.bg = background
+        self.lines = line_background(detector, background)
+        self.tracker = Tracker(config.tracker)
+        self.selector = TargetSelector(config.target, config.dwell_s)
+        self.timings = Timings()
+        self.on_frame = on_frame
+        self.log_path = log_path
+        self.counts = {"frames": 0, "broken": 0, "wrong_size": 0, "commands_sent": 0, "dead_zone": 0,
+                       "no_target": 0, "invalid_geometry": 0, "deadline_overruns": 0}
+        self.sent: tuple[float, float, float] | None = None
+        self.sent_at: float | None = None
+        self._arrive_at = 0.0
+        self._sent_track: int | None = None
+        self._stop = threading.Event()
+        self._old_handlers: dict = {}
+        self.t_start = time.monotonic()
+        self._pending: dict[int, float] = {}  # driver sequence number -> frame available time
+        self.stop_reason = "source ended"
+        W, H = rig.omni.image_size
+        self.shape = (H, W, 3)
+        self._theta_map = jnp.asarray(rig.omni.to_polar(*np.meshgrid(np.arange(W), np.arange(H)))[1], jnp.float32)
+        self.period = 1.0 / capture.source.fps if capture.source.fps else None
+
+    # -- control --------------------------------------------------------------------------
+
+    def stop(self, reason: str) -> None:
+        self.stop_reason = reason
+        self._stop.set()
+
+    def install_signal_handlers(self) -> None:
+        """Ctrl-C and SIGTERM end the loop cleanly (PTZ home, summary written); see :meth:`restore_signal_handlers`."""
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._old_handlers[sig] = signal.signal(sig, lambda s, _f: self.stop(signal.Signals(s).name))
+
+    def restore_signal_handlers(self) -> None:
+        """Put back the handlers :meth:`install_signal_handlers` replaced."""
+        for sig, handler in self._old_handlers.items():
+            signal.signal(sig, handler)
+        self._old_handlers.clear()
+
+    def warm_up(self):
+        """Compile the jitted stages on a frame of the right size before timing anything; returns
+        the (empty) detections of the blank frame."""
+        blank = jnp.zeros(self.shape, jnp.uint8)
+        dets = perceive(self.detector, self.rig, blank, self.bg, self.lines)[0]
+        jax.block_until_ready(update_background(self.detector, self.bg, blank, self._theta_map, dets,
+                                                self.rig.detection.adapt_rate * self.cfg.adapt_every))
+        jax.block_until_ready(aim_at_floor(self.rig, jnp.array([1.0, 0.5]), 0.01 * jnp.eye(2)))
+        return dets
+
+    # -- the loop -------------------------------------------------------------------------
+
+    def run(self) -> None:
+        self.t_start = t_start = time.monotonic()
+        last_status = t_start
+        with self.log_path.open("w") as log:
+            while not self._stop.is_set():
+                if self.cfg.max_frames is not None and self.counts["frames"] >= self.cfg.max_frames:
+                    self.stop_reason = "frame limit"
+                    break
+                if self.cfg.max_seconds is not None and time.monotonic() - t_start >= self.cfg.max_seconds:
+                    self.stop_reason = "time limit"
+                    break
+                t0 = time.monotonic()
+                frame = self.capture.get(timeout=0.5)
+                if frame is None:
+                    if self.capture.ended:
+                        self.stop_reason = "source ended"
+                        break
+                    continue
+                self._record("capture", t0)
+                self._process(frame, log)
+                now = time.monotonic()
+                if not self.cfg.quiet and now - last_status >= self.cfg.status_every_s:
+                    self._status(now - t_start)
+                    last_status = now
+        self.elapsed = time.monotonic() - t_start
+        if not self.cfg.quiet:
+            sys.stderr.write("\n")
+
+    def _record(self, stage: str, t0: float) -> float:
+        t1 = time.monotonic()
+        self.timings.stages[stage].append(1e3 * (t1 - t0))
+        return t1
+
+    def _process(self, frame: Frame, log) -> None:
+        record: dict = {"frame": frame.index, "t": round(frame.t, 6)}
+        if frame.image is None:
+            self.counts["broken"] += 1
+            log.write(json.dumps({**record, "fault": "broken frame"}) + "\n")
+            return
+        if frame.image.shape != self.shape:
+            self.counts["wrong_size"] += 1
+            h, w = frame.image.shape[:2]
+            log.write(json.dumps({**record, "fault": f"frame {w}x{h}, expected {self.shape[1]}x{self.shape[0]}"}) + "\n")
+            return
+        self.counts["frames"] += 1
+        t = time.monotonic()
+        x = jnp.asarray(frame.image)
+        dets, _, z, R = perceive(self.detector, self.rig, x, self.bg, self.lines)
+        valid = np.asarray(dets.valid)
+        z, R = np.asarray(z)[valid], np.asarray(R)[valid]
+        t = self._record("detect", t)
+        tracks = self.tracker.step(frame.stamp, z, R)
+        confirmed = self.tracker.confirmed()
+        t = self._record("track", t)
+        command = self._aim(frame, confirmed)
+        t = self._record("aim", t)
+        if command is not None and command.sent:
+            self._send(command)
+        t_sent = time.monotonic()
+        self._record("send", t)
+        if command is not None and command.sent:
+            self.timings.compute.append(1e3 * (t_sent - frame.t))
+            if self.driver is None:
+                self.timings.latency.append(1e3 * (t_sent - frame.t))
+            else:
+                self._pending[self.driver.sequence] = frame.t
+        self._collect_writes()
+        t = t_sent
+        if self.on_frame is not None:
+            record.update(self.on_frame(record, frame, dets, z, tracks, command) or {})
+        t = self._record("draw", t)
+        record.update(self._describe(dets, valid, confirmed, command))
+        log.write(json.dumps(record) + "\n")
+        t = self._record("log", t)
+        if self.counts["frames"] % self.cfg.adapt_every == 0:
+            self.bg, self.lines = update_background(self.detector, self.bg, x, self._theta_map, dets,
+                                                    self.rig.detection.adapt_rate * self.cfg.adapt_every)
+            jax.block_until_ready(self.lines)
+        self._record("adapt", t)
+        elapsed = time.monotonic() - frame.t
+        self.timings.frame.append(1e3 * elapsed)
+        if self.period and elapsed > self.period:
+            self.counts["deadline_overruns"] += 1
+
+    def _settled(self) -> bool:
+        """Whether the PTZ should have reached the last command by now (slew-time estimate)."""
+        if self.sent_at is None or self.sent is None:
+            return False
+        return time.monotonic() >= self._arrive_at
+
+    def _slew_time(self, target: tuple[float, float, float], zoom: bool = True) -> float:
+        """Seconds the PTZ needs from the last command to ``target`` (device slew rates, and the zoom
+        speed unless ``zoom`` is false)."""
+        if self.profile is None or self.sent is None:
+            return 0.0
+        d_pan = abs(math.degrees(math.remainder(target[0] - self.sent[0], 2 * math.pi)))
+        d_tilt = abs(math.degrees(target[1] - self.sent[1]))
+        zp = self.profile.zoom
+        z_span = max(zp.position) - min(zp.position)
+        d_zoom = abs(self.profile.zoom_position(target[2]) - self.profile.zoom_position(self.sent[2])) / z_span
+        return max(d_pan / self.profile.pan.slew_deg_s(), d_tilt / self.profile.tilt.slew_deg_s(),
+                   d_zoom * zp.seconds_full_range if zoom else 0.0)
+
+    def _aim(self, frame: Frame, tracks) -> Command | None:
+        target = self.selector.choose(frame.stamp, tracks, self._settled())
+        if target is None:
+            self.counts["no_target"] += 1
+            return None
+        # the head is predicted to when the PTZ's pan and tilt get there (their slew time from the last
+        # command), refined once; the zoom keeps adjusting meanwhile and does not lengthen the horizon,
+        # which would widen the uncertainty, hence the zoom, hence the horizon
+        lead = 0.0
+        for _ in range(2):
+            t_predicted = frame.stamp + lead
+            xp, Pp = target.predict(t_predicted, self.tracker.accel_sd)
+            aimed = aim_at_floor(self.rig, jnp.asarray(xp[:2]), jnp.asarray(Pp[:2, :2]))
+            lead = self._slew_time((float(aimed.pan), float(aimed.tilt), 1.0), zoom=False)
+        if not bool(aimed.valid):
+            self.counts["invalid_geometry"] += 1
+            return None
+        zooms = {rule: float(aimed.zoom[i]) for i, rule in enumerate(RULES)}
+        pan, tilt, zoom = float(aimed.pan), float(aimed.tilt), zooms[self.cfg.zoom_rule]
+        cov = np.asarray(aimed.cov)
+        sd_pan, sd_tilt = math.sqrt(cov[0, 0]), math.sqrt(cov[1, 1])
+        new_target = self.selector.current != self._sent_track
+        send = new_target or outside_dead_zone((pan, tilt, zoom), self.sent, sd_pan, sd_tilt, self.cfg.dead_zone_sd)
+        if not send:
+            self.counts["dead_zone"] += 1
+        return Command(track=target.id, pan=pan, tilt=tilt, zoom=zoom, zooms=zooms, sd_pan=sd_pan,
+                       sd_tilt=sd_tilt, sent=send, t_predicted=t_predicted, aimed=aimed,
+                       floor_sd=np.sqrt(np.diag(Pp)[:2]))
+
+    def _send(self, cmd: Command) -> None:
+        if self.driver is not None:
+            self.driver.set_target(cmd.pan, cmd.tilt, cmd.zoom)
+            time.sleep(0)  # hand the GIL to the driver's worker now, so that the bytes go out before the logging
+        self._arrive_at = time.monotonic() + self._slew_time((cmd.pan, cmd.tilt, cmd.zoom))
+        self.sent = (cmd.pan, cmd.tilt, cmd.zoom)
+        self.sent_at = time.monotonic()
+        self._sent_track = cmd.track
+        self.counts["commands_sent"] += 1
+
+    def _collect_writes(self) -> None:
+        """Frame-to-wire latency of the targets the driver has written (superseded ones never are)."""
+        if self.driver is None:
+            return
+        for seq, t_write in self.driver.take_writes():
+            t_frame = self._pending.pop(seq, None)
+            if t_frame is not None:
+                self.timings.latency.append(1e3 * (t_write - t_frame))
+            for k in [k for k in self._pending if k < seq]:
+                del self._pending[k]
+
+    def home(self, wait_s: float = 3.0) -> bool:
+        """Send the PTZ home (end of run); whether it reported being there within ``wait_s``."""
+        if self.driver is None:
+            return True
+        self.driver.set_target(*self.cfg.home)
+        reached = self.driver.wait_reached(wait_s)
+        self._collect_writes()
+        return reached
+
+    # -- reporting ------------------------------------------------------------------------
+
+    def _describe(self, dets, valid, tracks, command: Command | None) -> dict:
+        people = [{"r_f": round(float(dets.r_f[k]), 3), "theta_f": round(float(dets.theta_f[k]), 5),
+                   "sigma_r_f": round(float(dets.sigma_r_f[k]), 3),
+                   "sigma_theta_f": round(float(dets.sigma_theta_f[k]), 5),
+                   "contrast": round(float(dets.contrast[k]), 2)} for k in np.nonzero(valid)[0]]
+        out = {"detections": people,
+               "tracks": [{"id": tr.id, "xy": [round(float(v), 3) for v in tr.position],
+                           "v": [round(float(v), 3) for v in tr.x[2:]], "captured": tr.captured} for tr in tracks]}
+        if command is not None:
+            out["ptz"] = {"track": command.track, "pan_deg": round(math.degrees(command.pan), 3),
+                          "tilt_deg": round(math.degrees(command.tilt), 3), "zoom": round(command.zoom, 3),
+                          "zooms": {k: round(v, 3) for k, v in command.zooms.items()},
+                          "sd_pan_deg": round(math.degrees(command.sd_pan), 4),
+                          "sd_tilt_deg": round(math.degrees(command.sd_tilt), 4), "sent": command.sent,
+                          "t_predicted": round(command.t_predicted, 4),
+                          "floor_sd_m": [round(float(v), 4) for v in command.floor_sd]}
+        return out
+
+    def _status(self, elapsed: float) -> None:
+        n = self.counts["frames"]
+        lat = self.timings.latency.recent(50)
+        ptz = ""
+        if self.sent is not None:
+            ptz = f"PTZ {math.degrees(self.sent[0]):6.1f}/{math.degrees(self.sent[1]):5.1f} deg x{self.sent[2]:4.1f}"
+        errors = ""
+        if self.driver is not None:
+            c = self.driver.counters
+            errors = f" err {c['errors']} reconn {c['reconnects']}" + ("" if self.driver.connected else " [PTZ down]")
+        sys.stderr.write(
+            f"\r{n:6d} frames {n / max(elapsed, 1e-9):5.1f} fps | latency "
+            f"{np.median(lat) if lat.size else float('nan'):5.2f} ms | tracks {len(self.tracker.confirmed()):2d} | "
+            f"{ptz}{errors} | dropped {self.capture.counts['dropped']} stale {self.capture.counts['stale']}   ")
+        sys.stderr.flush()
+
+    def summary(self) -> dict:
+        """The ``summary.json`` object (DESIGN.md section 7), without the demo's scores."""
+        frames = self.counts["frames"]
+        ptz = {"commands": self.counts["commands_sent"], "errors": 0, "reconnects": 0}
+        if self.driver is not None:
+            st = self.driver.stats()
+            ptz = {"commands": st["commands"], "errors": st["errors"], "reconnects": st["reconnects"],
+                   "commands_requested": self.counts["commands_sent"], "driver": st}
+        return {
+            "frames": frames,
+            "fps": frames / self.elapsed if getattr(self, "elapsed", 0) else 0.0,
+            "seconds": getattr(self, "elapsed", 0.0),
+            "stop_reason": self.stop_reason,
+            "latency_ms": Timings.stats(self.timings.latency),
+            "compute_latency_ms": Timings.stats(self.timings.compute),
+            "frame_ms": Timings.stats(self.timings.frame),
+            "stages_ms": {k: Timings.stats(v) for k, v in self.timings.stages.items()},
+            "ptz": ptz,
+            "faults": {"broken_frames": self.capture.counts["broken"],
+                       "wrong_size_frames": self.capture.counts["wrong_size"],
+                       "stale_frames": self.capture.counts["stale"], "dropped_frames": self.capture.counts["dropped"],
+                       "deadline_overruns": self.counts["deadline_overruns"],
+                       "source_ended": self.stop_reason == "source ended"},
+            "counts": self.counts,
+            "captures": self.selector.captures,
+            "config": {"zoom_rule": self.cfg.zoom_rule, "tracker": self.cfg.tracker, "target": self.cfg.target,
+                       "dwell_s": self.cfg.dwell_s, "dead_zone_sd": self.cfg.dead_zone_sd,
+                       "inputs": list(INPUT_NAMES)},
+        }
+

@@ -1,0 +1,240 @@
+"""One run of the real-time loop with its outputs: what ``omnijax run`` and ``omnijax demo`` share.
+
+:func:`run_session` learns the background from the source's first frames, builds the detector,
+starts the capture thread, runs :class:`~runtime.loop.RealTimeLoop` until the source ends, a limit
+is reached or Ctrl-C/SIGTERM arrives, sends the PTZ home, and writes into the output folder
+(staged: nothing half-written) ``summary.json``, ``log.jsonl`` and ``annotated.mp4`` (or ``.avi``
+where OpenCV has no MP4 encoder). :class:`Annotator` draws the operator's view (the paper's
+figure 1) for each processed frame.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from omnijax import Rig, build_detector, learn_background
+from omnijax.detection import polar_range
+from runtime.realtime.loop import LoopConfig, RealTimeLoop
+from runtime.output import dumps, staged_output
+from runtime.realtime.overlay import (
+    GREEN,
+    GREY,
+    ORANGE,
+    RED,
+    WHITE,
+    YELLOW,
+    compose_view,
+    draw_detections,
+    draw_tracks,
+    track_pixels,
+)
+from runtime.realtime.sources import Capture, Source
+
+
+class VideoOut:
+    """An OpenCV video writer: ``stem``.mp4 (mp4v) where the build can, else Motion-JPEG ``stem``.avi
+    (``replay``: only the AVI, each frame a JPEG of quality 95, for re-reading with ``omnijax run``)."""
+
+    def __init__(self, folder: Path, fps: float, size: tuple[int, int], stem: str = "annotated",
+                 replay: bool = False):
+        self.writer = None
+        options = [(f"{stem}.avi", "MJPG")] if replay else [(f"{stem}.mp4", "mp4v"), (f"{stem}.avi", "MJPG")]
+        for name, codec in options:
+            w = cv2.VideoWriter(str(folder / name), cv2.VideoWriter_fourcc(*codec), fps, size)
+            if w.isOpened():
+                if replay:
+                    w.set(cv2.VIDEOWRITER_PROP_QUALITY, 95)
+                self.writer, self.name = w, name
+                break
+            (folder / name).unlink(missing_ok=True)
+        if self.writer is None:
+            raise RuntimeError("OpenCV can write neither MP4 nor Motion-JPEG AVI video here")
+        self.frames = 0
+
+    def write(self, rgb: np.ndarray) -> None:
+        self.writer.write(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+        self.frames += 1
+
+    def close(self) -> None:
+        self.writer.release()
+
+
+@dataclass
+class Annotator:
+    """Draws the operator's view of each processed frame and hands it to ``sinks``.
+
+    ``foveal(frame, loop) -> (image | None, label)`` supplies the PTZ inset (the demo renders
+    it from the synthetic world at the emulated PTZ's actual position); ``None`` shows the
+    commanded PTZ state only.
+    """
+
+    rig: Rig
+    title: str
+    foveal: Callable | None = None
+    sinks: list = field(default_factory=list)
+    loop: RealTimeLoop | None = None
+    last: np.ndarray | None = None
+
+    def __post_init__(self):
+        self.r_range = polar_range(self.rig)
+
+    def warm_up(self, blank: np.ndarray, dets) -> None:
+        """Compile the drawing's jitted parts (and the inset's) before the loop starts."""
+        draw_detections(blank, self.rig, dets, self.r_range)
+        track_pixels(self.rig, np.array([1.0, 0.5, 0.1, 0.0]), 0.01 * np.eye(4))
+        if hasattr(self.foveal, "warm_up"):
+            self.foveal.warm_up()
+
+    def __call__(self, record, frame, dets, z, tracks, command) -> dict:
+        loop = self.loop
+        img = draw_detections(frame.image, self.rig, dets, self.r_range)
+        confirmed = loop.tracker.confirmed()
+        draw_tracks(img, self.rig, confirmed, command.track if command is not None else None)
+        inset, inset_label = (None, "PTZ")
+        if self.foveal is not None:
+            inset, inset_label = self.foveal(frame, loop)
+        n, elapsed = loop.counts["frames"], max(time.monotonic() - loop.t_start, 1e-9)
+        lat = loop.timings.latency.recent(50) if len(loop.timings.latency) else loop.timings.compute.recent(50)
+        lines = [(f"{n / elapsed:5.1f} fps   latency {np.median(lat) if lat.size else float('nan'):5.2f} ms", WHITE),
+                 (f"tracks {len(confirmed)}   faces captured {loop.selector.captures}", WHITE)]
+        if command is not None:
+            lines.append((f"target #{command.track}  pan {math.degrees(command.pan):6.1f}  "
+                          f"tilt {math.degrees(command.tilt):5.1f}", ORANGE))
+            lines.append((f"zoom x{command.zoom:4.1f} ({loop.cfg.zoom_rule}, p={float(self.rig.p_contain):.2f})",
+                          ORANGE))
+            lines.append((f"sd pan {math.degrees(command.sd_pan):.2f}  tilt {math.degrees(command.sd_tilt):.2f} deg",
+                          YELLOW))
+        else:
+            lines.append(("no target", GREY))
+        if loop.driver is not None:
+            c = loop.driver.counters
+            up = loop.driver.connected
+            lines.append((f"PTZ {'online' if up else 'OFFLINE'}  cmds {c['commands']}  err {c['errors']}  "
+                          f"reconn {c['reconnects']}", GREEN if up else RED))
+        faults = loop.counts["broken"] + loop.counts["wrong_size"]
+        lines.append((f"faults: broken {loop.counts['broken']}  size {loop.counts['wrong_size']}  "
+                      f"stale {loop.capture.counts['stale']}", RED if faults else GREY))
+        clock = f"frame {frame.index:6d}   t {frame.stamp:8.2f} s"
+        self.last = compose_view(img, inset, self.title, clock, lines, inset_label)
+        for sink in self.sinks:
+            sink(self.last)
+        return {}
+
+
+def learn_from_source(frames_iter, n: int, what: str, step: int = 1):
+    """The background from ``n`` readable frames of ``frames_iter``, every ``step``-th (broken ones
+    skipped): spacing them out keeps people who stand still for a while out of the background.
+    Returns it and the number of frames read."""
+    from runtime.errors import UsageError
+
+    got, read = [], 0
+    for img in frames_iter:
+        read += 1
+        if img is not None and (read - 1) % step == 0:
+            got.append(img)
+        if len(got) == n:
+            break
+    if len(got) < n:
+        raise UsageError(f"{what}: only {len(got)} readable frames, expected at least {n} to learn the background")
+    return learn_background(np.stack(got)), read
+
+
+def chain_hooks(*hooks) -> Callable:
+    """One ``on_frame`` hook calling each of ``hooks`` in turn and merging their log fields."""
+    def on_frame(*args):
+        out = {}
+        for h in hooks:
+            if h is not None:
+                out.update(h(*args) or {})
+        return out
+    return on_frame
+
+
+def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=None, config: LoopConfig,
+                paced: bool = True, background_frames: int | None = None, background_step: int = 1,
+                video: bool = True, record: bool = False,
+                title: str = "omnijax", foveal: Callable | None = None, hooks: tuple = (),
+                finish: Callable | None = None, extra: dict | None = None, screenshot_at: int | None = None) -> dict:
+    """Run the loop on ``source`` and write the outputs to ``out`` (see the module docstring).
+
+    ``hooks`` are extra ``on_frame`` hooks (the demo's scorer, fault injection); ``record`` writes
+    the processed omni frames as they came (``omni.avi``, to replay with ``omnijax run``); ``finish(summary)``
+    may add to the summary before it is written; ``screenshot_at`` saves that processed frame's
+    view as ``view.png``. Returns the summary.
+    """
+    # the PTZ driver's and the capture's threads get the interpreter within 1 ms (default 5 ms) of a wake-up
+    sys.setswitchinterval(0.001)
+    n_bg = background_frames or rig.detection.background_frames
+    W, H = rig.omni.image_size
+    t0 = time.monotonic()
+    with staged_output(out) as stage:
+        frames = source.frames()
+        bg, first = learn_from_source(frames, n_bg, source.name, background_step)
+        if bg.mean.shape[:2] != (H, W):
+            from runtime.errors import UsageError
+
+            raise UsageError(f"{source.name}: frames are {bg.mean.shape[1]}x{bg.mean.shape[0]}, "
+                             f"expected {W}x{H} (omni.image_size of the rig)")
+        detector = build_detector(rig)
+        writer = VideoOut(stage, source.fps or 25.0, (W + W // 2, H)) if video else None
+        annot = Annotator(rig, title, foveal, [writer.write] if writer else [])
+        capture = Capture(source, paced=paced, frames=frames, first_index=first, shape=(H, W, 3))
+        loop = RealTimeLoop(rig, detector, bg, capture, driver, profile, config, stage / "log.jsonl",
+                            on_frame=chain_hooks(*hooks, annot if (video or screenshot_at is not None) else None))
+        annot.loop = loop
+
+        def shoot(record, frame, *_):
+            if screenshot_at is not None and loop.counts["frames"] == screenshot_at and annot.last is not None:
+                cv2.imwrite(str(stage / "view.png"), cv2.cvtColor(annot.last, cv2.COLOR_RGB2BGR))
+            return {}
+
+        recorder = VideoOut(stage, source.fps or 25.0, (W, H), "omni", replay=True) if record else None
+
+        def rec(record_, frame, *_):
+            if recorder is not None:
+                recorder.write(frame.image)
+            return {}
+
+        loop.on_frame = chain_hooks(loop.on_frame, shoot, rec)
+        blank_dets = loop.warm_up()
+        if video or screenshot_at is not None:
+            annot.warm_up(np.zeros((H, W, 3), np.uint8), blank_dets)
+        setup_s = time.monotonic() - t0
+        loop.install_signal_handlers()
+        try:
+            with capture:
+                loop.run()
+        finally:
+            loop.restore_signal_handlers()
+            homed = loop.home()
+            for w in (writer, recorder):
+                if w is not None:
+                    w.close()
+        summary = loop.summary()
+        summary.update({"source": source.name, "setup_s": setup_s, "background_frames": n_bg,
+                        "background_step": background_step, "first_frame": first, "ptz_homed": homed,
+                        "outputs": {"log": "log.jsonl", **({"video": writer.name} if writer else {}),
+                                    **({"record": recorder.name} if recorder else {})}})
+        summary.update(extra or {})
+        if finish is not None:
+            finish(summary)
+        (stage / "summary.json").write_text(dumps(summary) + "\n")
+    return summary
+
+
+def read_state(path: Path) -> dict | None:
+    """The emulator's ``--state-file`` object, or ``None`` while it is being replaced or absent."""
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return None
+

@@ -1,0 +1,495 @@
+"""End-to-end characterisation on rendered frames: the paper's Table 1, detection rates, containment.
+
+DESIGN.md section 5. A person stands still at eight floor positions P1-P8 (different
+distances and directions from the PTZ) in the synthetic world; every trial renders
+an omni frame with fresh sensor noise and runs the detector on it.
+
+- Table 1 (the paper's experiment): one fixed rig (the world's true rig is the
+  configured one) and a fresh person per trial (H_p, R_h, clothing from the priors, as
+  the paper's trials had different people stand at each mark), so the trial-to-trial
+  spread comes from detection and the person, not calibration; the prediction is the
+  mean over trials of the pointing covariance with the detection sigmas (sigma_r_f,
+  sigma_theta_f of each detection) and the person priors (H_p, R_h), calibration sigmas
+  zero. One person under sensor noise alone hardly moves the estimate (0-0.3 px).
+- Table 1 with full propagation: a fresh true rig (:func:`omnijax.draw_true_rig`) and a
+  fresh person (H_p, R_h, clothing) per trial; what is compared is the pointing error
+  (computed from the detection with the configured rig, minus the truth), against the
+  full propagation (calibration sigmas, person priors, detection sigmas).
+- Rates: false alarms on empty frames (per radial line against x_f, per frame against
+  the thresholds' predicted rate) and misses over all person trials (against x_m).
+- Containment: for the fresh-rig trials, whether the true head disc lies in the foveal
+  frame at the zoom each rule chooses for each p_contain.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.stats import beta
+
+from omnijax import (
+    Rig,
+    build_detector,
+    choose_zoom,
+    detect,
+    learn_background,
+    line_background,
+    pointing,
+    point_image_radius,
+    pointing_covariance,
+)
+from omnijax.detection import Background
+from omnijax.detection import Detections, Detector, LineBackground, line_change
+from omnijax.world import head_in_view
+from omnijax.world import draw_people, walkable
+from omnijax.world import Scenario, parse_scenario
+from omnijax.world import expose
+from omnijax.world import World, build_world, draw_true_rig, render_frame
+
+#: Containment is measured at these p_contain, for both zoom rules.
+P_CONTAIN = (0.9, 0.95, 0.99)
+RULES = ("paper", "calibrated")
+#: Clearance (m) of the positions from walls and excluded zones, and their distance from the PTZ and the omni axis.
+CLEARANCE, NEAR_PTZ, NEAR_AXIS = 0.5, 1.0, 0.6
+
+Progress = Callable[[int], None]
+
+
+def table1_scenario(rig: Rig, seed: int = 0) -> Scenario:
+    """A plain room on the rig's floor outline, one person, three lamps near the ceiling, no drift.
+
+    Built from the rig alone so that ``omnijax validate`` works for any rig file;
+    the lamps sit on a ring around the outline's centroid, inside the room.
+    """
+    outline = np.asarray(rig.room.outline)
+    centre = outline.mean(0)
+    height = max(3.0, float(rig.omni.H_o) + 0.3)
+    lamps = []
+    for a in (0.3, 2.4, 4.5):
+        for shrink in (0.5, 0.25, 0.0):
+            p = centre + shrink * (outline - centre).max(0) * np.array([math.cos(a), math.sin(a)])
+            if bool(rig.room.contains(p[0], p[1])):
+                break
+        lamps.append({"position": [float(p[0]), float(p[1]), height - 0.1], "intensity": 800.0})
+    data = {
+        "name": "table 1", "rig": "(validate)", "seed": seed,
+        "room": {"height": height,
+                 "floor": {"colour": [0.46, 0.40, 0.33], "tile": 0.6, "tile_variation": 0.05, "texture": 0.08,
+                           "texture_scale": 0.04},
+                 "walls": {"colour": [0.72, 0.70, 0.64], "texture": 0.04, "texture_scale": 0.2}},
+        "people": {"count": 1},
+        "lighting": {"spectrum": [1.0, 0.93, 0.80], "ambient": 60.0, "lamps": lamps},
+        "sensor": {"vignetting": 0.15, "antialias": 2, "shadow_downsample": 4},
+    }
+    return parse_scenario(data, rig, source="validate's Table 1 scenario")
+
+
+def still(scenario: Scenario) -> Scenario:
+    """``scenario`` without illumination drift: trials differ by sensor noise (and the rig) only."""
+    return eqx.tree_at(lambda s: s.lighting.drift_amplitude, scenario, jnp.zeros(()))
+
+
+@eqx.filter_jit
+def _walkable_here(rig: Rig, furniture, pts, ptz):
+    """Where Table 1's person may stand (see :func:`table1_positions`)."""
+    rho = jnp.hypot(pts[:, 0], pts[:, 1])
+    top = point_image_radius(rho, rig.person.H_p, rig.omni.r_m, rig.omni.H_o, rig.omni.profile)
+    return (walkable(rig, furniture, pts[:, 0], pts[:, 1], CLEARANCE) & (rho >= NEAR_AXIS)
+            & (top < 0.95 * rig.omni.rim) & (jnp.hypot(*(pts - ptz).T) >= NEAR_PTZ))
+
+
+def table1_positions(rig: Rig, scenario: Scenario, n: int = 8) -> np.ndarray:
+    """``n`` floor positions (m, n x 2) at different directions and distances from the PTZ.
+
+    Walkable floor here means inside the room, out of excluded zones and furniture,
+    ``CLEARANCE`` from walls, ``NEAR_PTZ`` from the PTZ's foot, ``NEAR_AXIS`` from the
+    omni axis (where r_f -> 0), with the whole person inside the image. Positions come
+    in pairs on n / 2 directions seen from the PTZ's foot, evenly spread over the
+    directions of the walkable floor (its 2nd to 98th percentile), one at 25 % and one
+    at 75 % of the way from that ray's first to its last walkable point: near and far,
+    all around. Raises ``ValueError`` if there is no walkable floor.
+    """
+    fo = rig.foveal
+    ptz = np.array([float(fo.D_c * jnp.cos(fo.theta_c)), float(fo.D_c * jnp.sin(fo.theta_c))])
+
+    def ok(pts):
+        return np.asarray(_walkable_here(rig, scenario.furniture, jnp.asarray(pts), jnp.asarray(ptz)))
+
+    outline = np.asarray(rig.room.outline)
+    x0, y0 = outline.min(0)
+    x1, y1 = outline.max(0)
+    grid = np.stack(np.meshgrid(np.arange(x0, x1, 0.05), np.arange(y0, y1, 0.05)), -1).reshape(-1, 2)
+    grid = grid[ok(grid)]
+    if not len(grid):
+        raise ValueError(f"no walkable floor {CLEARANCE} m from the walls and {NEAR_PTZ} m from the PTZ: "
+                         "the room is too small for Table 1's positions")
+    towards_axis = math.atan2(-ptz[1], -ptz[0]) if np.hypot(*ptz) > 1e-9 else 0.0
+    rel = np.asarray(_angle(np.arctan2(grid[:, 1] - ptz[1], grid[:, 0] - ptz[0]) - towards_axis))
+    lo, hi = np.percentile(rel, [2, 98])
+    s = np.arange(NEAR_PTZ, np.hypot(x1 - x0, y1 - y0) + 1, 0.02)
+    out = []
+    for k in range(n):
+        a = towards_axis + lo + (k // 2 + 0.5) / ((n + 1) // 2) * (hi - lo)
+        pts = ptz + s[:, None] * np.array([math.cos(a), math.sin(a)])
+        good = np.flatnonzero(ok(pts))
+        if not len(good):
+            raise ValueError(f"no walkable floor along direction {math.degrees(a):.0f} deg from the PTZ")
+        target = s[good[0]] + (0.25, 0.75)[k % 2] * (s[good[-1]] - s[good[0]])
+        out.append(pts[good[np.argmin(np.abs(s[good] - target))]])
+    return np.array(out)
+
+
+#: Where the person stands for empty frames: far outside any room, seen by no pixel (and casting no shadow on it).
+AWAY = (1.0e4, 0.0)
+
+
+@dataclass
+class Bench:
+    """The world (one person), the detector and the background learnt from empty frames."""
+
+    rig: Rig
+    scenario: Scenario
+    world: World
+    detector: Detector
+    bg: Background
+    lines: LineBackground
+    positions: np.ndarray
+
+
+def at(world: World, foot) -> World:
+    """``world`` with its one person standing still at ``foot`` (m) in every frame."""
+    pos = jnp.broadcast_to(jnp.asarray(foot, world.paths.position.dtype), world.paths.position.shape)
+    return eqx.tree_at(lambda w: (w.paths.position, w.paths.moving), world, (pos, jnp.zeros_like(world.paths.moving)))
+
+
+def prepare(rig: Rig, scenario: Scenario, seed: int = 0, foot_mc_profiles: int | None = None) -> Bench:
+    """Build the world, the detector and the background (learnt from empty frames, before a person enters).
+
+    ``foot_mc_profiles`` overrides the rig's ``detection.foot_mc_profiles`` (fewer for quick runs).
+    """
+    scenario = still(scenario)
+    n_bg = int(rig.detection.background_frames)
+    world = build_world(rig, scenario, seed=seed, n_frames=n_bg, true_rig=rig)
+    det_rig = rig if foot_mc_profiles is None else eqx.tree_at(
+        lambda r: r.detection, rig, dataclasses.replace(rig.detection, foot_mc_profiles=foot_mc_profiles))
+    detector = build_detector(det_rig, jax.random.key(seed))
+    linear = at(world, AWAY).linear(0)
+    sensor = scenario.sensor
+    keys = jax.vmap(lambda j: jax.random.bits(jax.random.fold_in(jax.random.key(seed), j), (2,), jnp.uint32))(
+        jnp.arange(n_bg) + 10_000)
+    frames = jax.jit(jax.vmap(expose, (None, None, 0, None)), static_argnums=3)(
+        linear, sensor.noise_sigma, keys, sensor.jpeg_quality)
+    bg = jax.jit(learn_background)(frames)
+    return Bench(rig=rig, scenario=scenario, world=world, detector=detector, bg=bg,
+                 lines=line_background(detector, bg), positions=table1_positions(rig, scenario))
+
+
+class Matched(eqx.Module):
+    """The detection that covers the person (``found``: one did), per trial."""
+
+    found: jax.Array
+    r_f: jax.Array
+    theta_f: jax.Array
+    sigma_r_f: jax.Array
+    sigma_theta_f: jax.Array
+    contrast: jax.Array
+
+
+def _angle(a):
+    return jnp.mod(a + jnp.pi, 2 * jnp.pi) - jnp.pi
+
+
+def match(dets: Detections, theta_true) -> tuple[Matched, jax.Array]:
+    """The valid detection whose sector contains ``theta_true`` (nearest centre if several), and
+    the number of other valid detections (false alarms)."""
+    half = 0.5 * jnp.mod(dets.theta_r - dets.theta_l, 2 * jnp.pi)
+    off = jnp.abs(_angle(dets.theta_f - theta_true))
+    covers = dets.valid & (off <= half + 1e-9)
+    k = jnp.argmin(jnp.where(covers, off, jnp.inf))
+    m = Matched(found=covers.any(), r_f=dets.r_f[k], theta_f=dets.theta_f[k], sigma_r_f=dets.sigma_r_f[k],
+                sigma_theta_f=dets.sigma_theta_f[k], contrast=dets.contrast[k])
+    return m, jnp.sum(dets.valid) - covers.any()
+
+
+class Trials(eqx.Module):
+    """Trials at one position: the matched detection, the true inputs x (9: r_f, theta_f, H_o, H_f,
+    D_c, theta_c, r_m, H_p, R_h) and the true head, the true rig, and per frame the other valid
+    detections and the radial lines over the lower threshold."""
+
+    det: Matched
+    x_true: jax.Array
+    head: jax.Array
+    R_h: jax.Array
+    true_rig: Rig
+    others: jax.Array
+    lines_over: jax.Array
+
+
+def _observe(detector: Detector, bg, lines, image, theta_true):
+    det, others = match(detect(detector, image, bg, lines)[0], theta_true)
+    return det, others, jnp.sum(line_change(detector, image, lines) > detector.thresholds.lower)
+
+
+def _truth_inputs(truth, true_rig: Rig):
+    o, f = true_rig.omni, true_rig.foveal
+    return jnp.stack([truth.r_f[0], truth.theta_f[0], o.H_o, f.H_f, f.D_c, f.theta_c, o.r_m, truth.H_p[0],
+                      truth.R_h[0]])
+
+
+@eqx.filter_jit
+def _fresh_chunk(world: World, detector: Detector, bg, lines, keys, new_rig: bool = True) -> Trials:
+    """One rendered frame per key, each with a fresh person and sensor noise, and (``new_rig``) a
+    fresh true rig."""
+    def one(key):
+        k_rig, k_people, k_noise = jax.random.split(key, 3)
+        true_rig = draw_true_rig(world.rig, k_rig) if new_rig else world.true_rig
+        people = draw_people(world.rig, world.scenario, k_people)
+        noise = jax.random.bits(k_noise, (2,), jnp.uint32)
+        w = eqx.tree_at(lambda w: (w.scene.true_rig, w.scene.people, w.scene.noise_key), world,
+                        (true_rig, people, noise))
+        frame = render_frame(w, 0)
+        tr = frame.truth
+        det, others, over = _observe(detector, bg, lines, frame.image, tr.theta_f[0])
+        return Trials(det=det, x_true=_truth_inputs(tr, true_rig), head=tr.head[0], R_h=tr.R_h[0],
+                      true_rig=true_rig, others=others, lines_over=over)
+
+    return jax.vmap(one)(keys)
+
+
+@eqx.filter_jit
+def _noise_chunk(detector: Detector, bg, lines, linear, sigma, jpeg: int, keys, theta_true):
+    """The same noise-free frame exposed once per key (fresh sensor noise), then detected."""
+    def one(key):
+        image = expose(linear, sigma, jax.random.bits(key, (2,), jnp.uint32), jpeg)
+        return _observe(detector, bg, lines, image, theta_true)
+
+    return jax.vmap(one)(keys)
+
+
+def concat(parts):
+    return jax.tree.map(lambda *a: np.concatenate([np.asarray(x) for x in a]), *parts)
+
+
+def _keys(key, i, chunk):
+    """Keys of trials i .. i + chunk - 1: always a whole chunk (one compilation); surplus trials are dropped."""
+    return jax.vmap(lambda j: jax.random.fold_in(key, j))(jnp.arange(i, i + chunk))
+
+
+def _head(tree, m):
+    return jax.tree.map(lambda a: a[:m], tree)
+
+
+#: What changes from trial to trial: the sensor noise only; also the person (H_p, R_h, clothing:
+#: Table 1, one fixed rig); also the true rig (full propagation, containment).
+FRESH = ("noise", "person", "rig")
+
+
+def trials(bench: Bench, foot, n: int, key, fresh: str, chunk: int = 25,
+           progress: Progress | None = None) -> Trials:
+    """``n`` trials with the person standing at ``foot`` (m; :data:`AWAY` for empty frames), each an
+    omni frame with fresh sensor noise, detected. ``fresh`` (one of :data:`FRESH`) says what else
+    is drawn anew per trial; with ``person`` or ``rig`` every trial renders anew (``chunk`` frames
+    per call); with ``noise`` the frame is rendered once and only exposed per trial (the same
+    frames, faster; ``2 chunk`` per call). Calls are padded to whole chunks: one compilation per size."""
+    if fresh not in FRESH:
+        raise ValueError(f"fresh must be one of {FRESH}, got {fresh!r}")
+    world = at(bench.world, foot)
+    parts = []
+    if fresh != "noise":
+        chunk = min(chunk, n)
+        for i in range(0, n, chunk):
+            m = min(chunk, n - i)
+            parts.append(_head(_fresh_chunk(world, bench.detector, bench.bg, bench.lines, _keys(key, i, chunk),
+                                            fresh == "rig"), m))
+            if progress:
+                progress(m)
+        return concat(parts)
+    linear = world.linear(0)
+    tr = render_frame(world, 0).truth
+    sensor = bench.scenario.sensor
+    chunk = min(2 * chunk, n)
+    for i in range(0, n, chunk):
+        m = min(chunk, n - i)
+        parts.append(_head(_noise_chunk(bench.detector, bench.bg, bench.lines, linear, sensor.noise_sigma,
+                                        sensor.jpeg_quality, _keys(key, i, chunk), tr.theta_f[0]), m))
+        if progress:
+            progress(m)
+    det, others, over = concat(parts)
+    rep = lambda a: np.broadcast_to(np.asarray(a), (n, *np.shape(a)))  # noqa: E731
+    return Trials(det=det, x_true=rep(_truth_inputs(tr, world.true_rig)), head=rep(tr.head[0]), R_h=rep(tr.R_h[0]),
+                  true_rig=jax.tree.map(rep, world.true_rig), others=others, lines_over=over)
+
+
+# --------------------------------------------------------------------------------------
+# Statistics
+# --------------------------------------------------------------------------------------
+
+
+def sample_variance(v: np.ndarray, about_zero: bool = False) -> tuple[float, float]:
+    """Sample variance of ``v`` and its standard error ``sqrt((m4 - s^4 (n - 3) / (n - 1)) / n)``
+    (from the sample's fourth central moment, no normality assumed). With ``about_zero`` the
+    mean square about 0 (an error's second moment) and its standard error ``sd(v^2) / sqrt(n)``."""
+    v = np.asarray(v, float)
+    n = v.size
+    if n < 4:
+        return float("nan"), float("nan")
+    if about_zero:
+        sq = v * v
+        return float(sq.mean()), float(sq.std(ddof=1) / math.sqrt(n))
+    d = v - v.mean()
+    s2 = float(d @ d / (n - 1))
+    m4 = float(np.mean(d**4))
+    return s2, math.sqrt(max(m4 - s2 * s2 * (n - 3) / (n - 1), 0.0) / n)
+
+
+def binomial(k: int, n: int, level: float = 0.95) -> dict:
+    """Rate ``k / n`` with its Clopper-Pearson interval at ``level``."""
+    a = 1 - level
+    lo = float(beta.ppf(a / 2, k, n - k + 1)) if k > 0 else 0.0
+    hi = float(beta.ppf(1 - a / 2, k + 1, n - k)) if k < n else 1.0
+    return {"rate": k / n if n else None, "count": int(k), "n": int(n), "lower": lo, "upper": hi, "level": level}
+
+
+@jax.jit
+def _pointing_stats(rig: Rig, r_f, theta_f, sigma_r_f, sigma_theta_f, mask):
+    """sin pan, tan tilt and their predicted variances per trial; ``mask`` selects the sigmas (9)."""
+    def one(r, t, sr, st):
+        x = rig.input_mean(r, t)
+        p = pointing(x, rig.omni.profile)
+        cov = pointing_covariance(x, rig.input_sigma(sr, st) * mask, rig.omni.profile, "autodiff")
+        return p.sin_pan, p.tan_tilt, cov.var_sin_pan, cov.var_tan_tilt
+
+    return jax.vmap(one)(r_f, theta_f, sigma_r_f, sigma_theta_f)
+
+
+def _true_pointing(profile, x_true):
+    p = jax.vmap(lambda x: pointing(x, profile))(jnp.asarray(x_true))
+    return np.asarray(p.sin_pan), np.asarray(p.tan_tilt)
+
+
+#: Which of the 9 inputs' sigmas Table 1's fixed-rig prediction keeps: the detection (r_f, theta_f)
+#: and, since every trial is a different person, the person priors (H_p, R_h); no calibration.
+DETECTION_ONLY = np.array([1.0, 1.0, 0, 0, 0, 0, 0, 1.0, 1.0])
+
+
+def table_row(rig: Rig, name: str, foot, t: Trials, detection_only: bool) -> dict:
+    """One Table 1 row: predicted (mean over trials) and empirical variances with sampling errors.
+
+    The empirical variance is that of the pointing error (computed from the detection
+    with the configured rig, minus the truth); with the rig and person fixed the truth is
+    fixed and this is the spread of the computed values, the paper's Table 1. Full
+    propagation rows also report the error's mean square (bias included).
+    ``diagnosis`` holds the detector's sigmas against the spread of its errors, and the
+    prediction with the measured detection spread in place of the detector's sigmas
+    (which separates the propagation from the detector's sigma estimates).
+    """
+    d = t.det
+    f = np.asarray(d.found, bool)
+    r_f, th, s_r, s_th = (np.asarray(a)[f] for a in (d.r_f, d.theta_f, d.sigma_r_f, d.sigma_theta_f))
+    x_true = np.asarray(t.x_true)[f]
+    mask = jnp.asarray(DETECTION_ONLY if detection_only else np.ones(9))
+    sp, tt, vsp, vtt = (np.asarray(a) for a in _pointing_stats(rig, *map(jnp.asarray, (r_f, th, s_r, s_th)), mask))
+    true_sp, true_tt = _true_pointing(rig.omni.profile, x_true)
+    e_r, e_th = r_f - x_true[:, 0], _angle(th - x_true[:, 1])
+    if detection_only:  # the trial-to-trial spread of the detection
+        alt_r, alt_th = np.full_like(r_f, np.std(r_f, ddof=1)), np.full_like(th, np.std(np.asarray(e_th), ddof=1))
+    else:  # its error about the truth, bias included
+        alt_r, alt_th = np.full_like(r_f, np.sqrt(np.mean(e_r**2))), np.full_like(th, np.sqrt(np.mean(np.asarray(e_th) ** 2)))
+    _, _, alt_sp, alt_tt = (np.asarray(a) for a in _pointing_stats(rig, *map(jnp.asarray, (r_f, th, alt_r, alt_th)), mask))
+    fo = rig.foveal
+    row = {"position": name, "foot_m": [float(v) for v in foot], "trials": int(f.sum()), "missed": int((~f).sum()),
+           "distance_to_ptz_m": float(np.hypot(foot[0] - fo.D_c * np.cos(fo.theta_c),
+                                               foot[1] - fo.D_c * np.sin(fo.theta_c)))}
+    for q, val, true, pred, alt in (("tan_tilt", tt, true_tt, vtt, alt_tt), ("sin_pan", sp, true_sp, vsp, alt_sp)):
+        err = val - true
+        emp, se = sample_variance(err)
+        p = float(np.mean(pred))
+        row[f"pred_var_{q}"] = p
+        row[f"emp_var_{q}"] = emp
+        row[f"emp_var_{q}_se"] = se
+        row[f"ratio_{q}"] = p / emp if emp > 0 else None
+        row[f"ratio_{q}_se"] = p * se / emp**2 if emp > 0 else None
+        row[f"bias_{q}"] = float(err.mean())
+        row[f"pred_var_{q}_measured_detection_sigma"] = float(np.mean(alt))
+        if not detection_only:
+            ms, ms_se = sample_variance(err, about_zero=True)
+            row[f"emp_mse_{q}"] = ms
+            row[f"emp_mse_{q}_se"] = ms_se
+            row[f"ratio_mse_{q}"] = p / ms if ms > 0 else None
+    row["diagnosis"] = {
+        "sigma_r_f_px": float(np.mean(s_r)), "r_f_sd_px": float(np.std(r_f, ddof=1)),
+        "r_f_error_rms_px": float(np.sqrt(np.mean(e_r**2))), "r_f_bias_px": float(np.mean(e_r)),
+        "sigma_theta_f_rad": float(np.mean(s_th)), "theta_f_sd_rad": float(np.std(np.asarray(e_th), ddof=1)),
+        "theta_f_error_rms_rad": float(np.sqrt(np.mean(np.asarray(e_th) ** 2))),
+        "contrast_median": float(np.median(np.asarray(d.contrast)[f])),
+    }
+    return row
+
+
+@eqx.filter_jit
+def _contained(rig: Rig, t: Trials, rule: str, p_contain):
+    """Whether the true head disc lies in the foveal frame at the zoom ``rule`` chooses for ``p_contain``."""
+    def one(det, head, R_h, true_rig):
+        x = rig.input_mean(det.r_f, det.theta_f)
+        p = pointing(x, rig.omni.profile)
+        cov = pointing_covariance(x, rig.input_sigma(det.sigma_r_f, det.sigma_theta_f), rig.omni.profile, "autodiff")
+        z = choose_zoom(rig.foveal.lens, rule, cov.cov, p.distance, p.tilt, p.slant, rig.person.R_h, p_contain)
+        view = head_in_view(true_rig, p.pan, p.tilt, z.zoom, head, R_h)
+        return view.inside, view.face_px, z.probability, z.zoom
+
+    return jax.vmap(one)(t.det, t.head, t.R_h, t.true_rig)
+
+
+def containment(rig: Rig, t: Trials, p_contain: tuple[float, ...] = P_CONTAIN) -> list[dict]:
+    """The containment curve: for each rule and p_contain, the rate over the detected (fresh-rig) trials,
+    its 95 % interval, the mean predicted probability, the median zoom and face width (px)."""
+    found = np.asarray(t.det.found, bool)
+    sub = jax.tree.map(lambda a: jnp.asarray(np.asarray(a)[found]), t)
+    out = []
+    for rule in RULES:
+        for p in p_contain:
+            inside, face, prob, zoom = (np.asarray(a) for a in _contained(rig, sub, rule, jnp.asarray(p)))
+            b = binomial(int(inside.sum()), inside.size)
+            out.append({"p_contain": p, "rule": rule, "rate": b["rate"], "trials": b["n"], "lower": b["lower"],
+                        "upper": b["upper"], "predicted_mean": float(prob.mean()),
+                        "face_px_median": float(np.median(face)), "zoom_median": float(np.median(zoom))})
+    return out
+
+
+def rates(rig: Rig, detector: Detector, empty: Trials, people: list[Trials]) -> dict:
+    """The report's ``rates``: false alarms per radial line on empty frames against x_f (eq 10), and
+    misses per person trial against x_m, with 95 % Clopper-Pearson intervals."""
+    n_lines = int(detector.polar.n_theta)
+    over = np.asarray(empty.lines_over)
+    fa = binomial(int(over.sum()), over.size * n_lines)
+    found = np.concatenate([np.asarray(t.det.found, bool) for t in people])
+    others = np.concatenate([np.asarray(t.others) for t in people])
+    miss = binomial(int((~found).sum()), found.size)
+    return {
+        "x_f": float(rig.detection.x_f), "false_alarm_rate": fa["rate"], "false_alarm_interval": [fa["lower"], fa["upper"]],
+        "x_m": float(rig.detection.x_m), "miss_rate": miss["rate"], "miss_interval": [miss["lower"], miss["upper"]],
+        "false_alarm_meaning": "share of radial lines of empty frames whose sum M exceeds the lower threshold (eq 10)",
+        "miss_meaning": "share of person trials (Table 1, both variants) with no valid sector covering the person",
+        "false_alarm_lines": fa, "misses": miss,
+        "empty_frames_with_detection": binomial(int((np.asarray(empty.others) > 0).sum()), over.size),
+        "predicted_frames_with_detection": float(detector.thresholds.seed_false_alarm),
+        "person_frames_with_extra_detection": binomial(int((others > 0).sum()), others.size),
+        "interval_level": 0.95,
+    }
+
+
+def summarise(rows: list[dict], quantities: tuple[str, ...] = ("tan_tilt", "sin_pan")) -> dict:
+    """Worst |ratio - 1| over the rows, per quantity, and how many rows are within +-10 %."""
+    out = {}
+    for q in quantities:
+        r = [row[f"ratio_{q}"] for row in rows if row[f"ratio_{q}"] is not None]
+        out[f"max_abs_ratio_error_{q}"] = max(abs(v - 1) for v in r) if r else None
+        out[f"rows_within_10pct_{q}"] = sum(abs(v - 1) <= 0.1 for v in r)
+    return out

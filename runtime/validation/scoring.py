@@ -1,0 +1,183 @@
+"""Scoring the real-time loop against the synthetic world's ground truth (``omnijax demo``).
+
+Per processed frame (an ``on_frame`` hook of :class:`~runtime.loop.RealTimeLoop`):
+
+- detection: detections and the people whose foot is inside the image are matched one to one
+  (Hungarian, floor distance gated at ``gate_m``). A *miss* is a person whose foot end is
+  visible (not hidden by furniture or another person) and who got no detection; a *false
+  alarm* is a detection matching nobody. ``miss_rate`` = misses / visible person-frames;
+  ``false_alarm_rate`` = false alarms / detections (also given per frame). ``foot_error_m``:
+  floor distance between each matched detection (eq 1 with the configured rig) and the true
+  foot.
+- containment: each frame with a target gives one trial per zoom rule: the commanded pan and
+  tilt with that rule's zoom, against the targeted person's true head at the time the command
+  was predicted for (interpolated between frames), in the world's *true* rig
+  (:func:`omnijax._foveal.head_in_view`: the whole head sphere inside the frame). The target is
+  the true person nearest the target track (within ``gate_m``; otherwise the trial fails).
+  ``face_px``: the head's width in the foveal image at that zoom and the true distance. Each
+  rule also reports the mean containment probability it predicted, and the rate over the
+  trials where it could reach p_contain at all (its widest zoom sufficed).
+
+Trials are scored in batches of :data:`BATCH` and only counts and histograms are kept, so the
+memory stays flat however long the demo runs.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from omnijax.world import head_in_view
+from runtime.realtime.loop import RULES
+
+#: Trials scored at once (one compiled shape); face widths are histogrammed in 1 px bins up to FACE_MAX.
+BATCH, FACE_MAX = 256, 4096
+
+
+@eqx.filter_jit
+def _trials(true_rig, pan, tilt, zoom, head, R_h):
+    """head_in_view over trials (n,) and rules (n, r): inside (n, r), face_px (n, r)."""
+    def one(p, t, z, h, r):
+        v = jax.vmap(lambda zz: head_in_view(true_rig, p, t, zz, h, r))(z)
+        return v.inside, v.face_px
+    return jax.vmap(one)(pan, tilt, zoom, head, R_h)
+
+
+class DemoScorer:
+    """Scores a run of :class:`~runtime.sources.SyntheticSource` (see the module docstring)."""
+
+    def __init__(self, world, source, gate_m: float = 0.5):
+        self.world, self.source, self.gate_m = world, source, gate_m
+        self.fps = float(world.scenario.fps)
+        self.positions = np.asarray(world.paths.position)  # (t, p, 2)
+        self.head_z = np.asarray(world.people.head_z)
+        self.R_h = np.asarray(world.people.R_h)
+        self.visible = self.misses = self.detections = self.false_alarms = self.frames = 0
+        self.foot_sq_sum, self.matched = 0.0, 0
+        self.batch: list[tuple] = []
+        self.trials = self.no_person = 0
+        nr = len(RULES)
+        self.contained, self.feasible, self.feasible_contained = np.zeros(nr, int), np.zeros(nr, int), np.zeros(nr, int)
+        self.prob_sum, self.zoom_sum = np.zeros(nr), np.zeros(nr)
+        self.face_hist, self.face_hist_in = np.zeros((nr, FACE_MAX + 1), int), np.zeros((nr, FACE_MAX + 1), int)
+        self.p_contain = float(world.rig.p_contain)
+        self.last_target_error: float | None = None
+
+    def __call__(self, record, frame, dets, z, tracks, command) -> dict:
+        truth = self.source.take_truth(frame.index)
+        if truth is None:
+            return {}
+        self.frames += 1
+        foot = np.asarray(truth.foot)
+        inside = np.nonzero(np.asarray(truth.in_image))[0]
+        visible = np.asarray(truth.foot_visible)
+        z = np.asarray(z).reshape(-1, 2)
+        matched = set()
+        if len(z) and len(inside):
+            d = np.linalg.norm(z[:, None] - foot[inside][None], axis=-1)
+            rows, cols = linear_sum_assignment(d)
+            for r, c in zip(rows, cols):
+                if d[r, c] <= self.gate_m:
+                    matched.add(int(inside[c]))
+                    self.foot_sq_sum += float(d[r, c]) ** 2
+                    self.matched += 1
+        n_vis = int(visible[inside].sum())
+        missed = sum(1 for j in inside if visible[j] and j not in matched)
+        fa = len(z) - len(matched)
+        self.visible += n_vis
+        self.misses += missed
+        self.detections += len(z)
+        self.false_alarms += fa
+        out = {"truth": {"visible": n_vis, "missed": missed, "false_alarms": fa}}
+        if command is not None:
+            out["truth"]["target_person"] = self._add_trial(frame.index, command, tracks)
+            out["truth"]["target_error_m"] = self.last_target_error
+        return out
+
+    def _add_trial(self, index: int, command, tracks) -> int | None:
+        xy = next((tr.position for tr in tracks if tr.id == command.track), None)
+        pos_now = self.positions[min(index, len(self.positions) - 1)]
+        person = None
+        if xy is not None:
+            d = np.linalg.norm(pos_now - xy, axis=-1)
+            self.last_target_error = float(d.min()) if d.size else None
+            if d.size and d.min() <= self.gate_m:
+                person = int(np.argmin(d))
+        if person is None:
+            self.no_person += 1
+            head, R_h = np.array([0.0, 0.0, -100.0]), 0.1  # below the floor: never in view
+        else:
+            k = min(max(command.t_predicted * self.fps, 0.0), len(self.positions) - 1.0)
+            k0 = int(np.floor(k))
+            k1 = min(k0 + 1, len(self.positions) - 1)
+            w = k - k0
+            p = (1 - w) * self.positions[k0, person] + w * self.positions[k1, person]
+            head, R_h = np.r_[p, self.head_z[person]], float(self.R_h[person])
+        prob = np.asarray(command.aimed.probability, float) if command.aimed is not None else np.full(len(RULES), np.nan)
+        self.batch.append((command.pan, command.tilt, [command.zooms[r] for r in RULES], head, R_h, prob))
+        if len(self.batch) == BATCH:
+            self._score_batch()
+        return person
+
+    def _score_batch(self) -> None:
+        n = len(self.batch)
+        if not n:
+            return
+        pad = self.batch + [self.batch[-1]] * (BATCH - n)
+        pan, tilt, zoom, head, R_h, prob = (np.array(v, float) for v in zip(*pad))
+        inside, px = (np.asarray(a)[:n] for a in _trials(self.world.true_rig, jnp.asarray(pan), jnp.asarray(tilt),
+                                                           jnp.asarray(zoom), jnp.asarray(head), jnp.asarray(R_h)))
+        zoom, prob = zoom[:n], prob[:n]
+        bins = np.clip(np.round(px), 0, FACE_MAX).astype(int)
+        feasible = prob >= self.p_contain - 1e-9
+        self.trials += n
+        self.contained += inside.sum(0)
+        self.feasible += feasible.sum(0)
+        self.feasible_contained += (feasible & inside).sum(0)
+        self.prob_sum += np.nan_to_num(prob).sum(0)
+        self.zoom_sum += zoom.sum(0)
+        for i in range(len(RULES)):
+            self.face_hist[i] += np.bincount(bins[:, i], minlength=FACE_MAX + 1)
+            self.face_hist_in[i] += np.bincount(bins[inside[:, i], i], minlength=FACE_MAX + 1)
+        self.batch.clear()
+
+    def summary(self, p_contain: float, rule: str) -> dict:
+        """The demo's scores for ``summary.json``; ``rate`` and ``median`` at the top are those of
+        ``rule`` (the one the PTZ was driven with), ``rules`` has both."""
+        det = {"miss_rate": self.misses / self.visible if self.visible else None,
+               "false_alarm_rate": self.false_alarms / self.detections if self.detections else None,
+               "false_alarms_per_frame": self.false_alarms / self.frames if self.frames else None,
+               "visible_person_frames": self.visible, "misses": self.misses,
+               "detections": self.detections, "false_alarms": self.false_alarms, "gate_m": self.gate_m}
+        foot = {"rms": float(np.sqrt(self.foot_sq_sum / self.matched)) if self.matched else None,
+                "matched": self.matched}
+        self._score_batch()
+        n = self.trials
+        cont = {"p_contain": p_contain, "rule": rule, "rate": None, "trials": n, "no_person": self.no_person,
+                "rules": {}}
+        face = {"rule": rule, "median": None, "rules": {}}
+        for i, r in enumerate(RULES):
+            if not n:
+                break
+            cont["rules"][r] = {
+                "rate": self.contained[i] / n, "contained": int(self.contained[i]), "trials": n,
+                "predicted_mean": self.prob_sum[i] / n, "zoom_mean": self.zoom_sum[i] / n,
+                "feasible_trials": int(self.feasible[i]),
+                "rate_feasible": self.feasible_contained[i] / self.feasible[i] if self.feasible[i] else None}
+            face["rules"][r] = {"median": _hist_median(self.face_hist[i]),
+                                "median_contained": _hist_median(self.face_hist_in[i])}
+        if n:
+            cont["rate"] = cont["rules"][rule]["rate"]
+            face["median"] = face["rules"][rule]["median"]
+        return {"detection": det, "foot_error_m": foot, "containment": cont, "face_px": face}
+
+
+def _hist_median(hist: np.ndarray) -> float | None:
+    """Median of values histogrammed in 1-unit bins (to the bin)."""
+    total = hist.sum()
+    if not total:
+        return None
+    return float(np.searchsorted(np.cumsum(hist), (total + 1) / 2))

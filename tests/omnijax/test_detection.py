@@ -1,0 +1,239 @@
+"""Detection kernels against independent references: SciPy's distributions, brute-force sums,
+a plain-Python hysteresis, and painted people whose foot is known to the pixel."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import stats
+
+from omnijax import (
+    adapt_background,
+    build_detector,
+    change_image,
+    change_measure,
+    detect,
+    foot_scores,
+    hysteresis_sectors,
+    learn_background,
+    line_background,
+    sensor_noise,
+)
+from omnijax.detection import chi2_variate, noncentral_chi2_variate
+
+
+def _noisy(rng, img, sigma=1.0):
+    return np.clip(np.rint(img + rng.normal(0, sigma, img.shape)), 0, 255).astype(np.uint8)
+
+
+def _textured(rng, H, W, block=8):
+    base = rng.uniform(60, 200, (H // block + 1, W // block + 1, 3))
+    return np.repeat(np.repeat(base, block, 0), block, 1)[:H, :W]
+
+
+def test_background_d2_is_chi2_2():
+    """n = 30 training frames, then 4 frames x 19200 pixels = 76800 d2 values of a textured
+    background under sigma = 1 grey level and 8-bit quantisation; KS against chi2(2) at the
+    0.001 level (false-failure probability 0.001)."""
+    rng = np.random.default_rng(1)
+    base = _textured(rng, 120, 160)
+    bg = learn_background(np.stack([_noisy(rng, base) for _ in range(30)]))
+    d2 = np.concatenate([np.asarray(change_image(_noisy(rng, base), bg)).ravel() for _ in range(4)])
+    assert stats.kstest(d2, "chi2", args=(2,)).pvalue > 1e-3
+    assert d2.mean() == pytest.approx(2.0, rel=0.03)
+
+
+def test_sensor_noise_recovers_sigma_with_quantisation():
+    rng = np.random.default_rng(2)
+    base = _textured(rng, 96, 128)
+    frames = np.stack([_noisy(rng, base, 1.5) for _ in range(20)])
+    sigma = np.asarray(sensor_noise(frames))
+    expect = math.sqrt(1.5**2 + 1 / 12)  # the quantiser adds 1/12 grey level^2
+    assert np.median(sigma) == pytest.approx(expect, rel=0.03)
+    assert np.percentile(sigma, 95) < 1.2 * expect
+
+
+def test_background_ignores_people_walking_through():
+    """A bright square crosses a third of the training frames: the median-centred mean rejects it."""
+    rng = np.random.default_rng(3)
+    base = _textured(rng, 64, 64)
+    frames = np.stack([_noisy(rng, base) for _ in range(30)])
+    frames[:10, 20:40, 20:40] = 250
+    bg = learn_background(frames)
+    assert np.abs(np.asarray(bg.mean)[20:40, 20:40] - base[20:40, 20:40]).max() < 2.0
+
+
+def test_d2_is_invariant_to_shadows_and_lamps():
+    """Scaling a pixel's RGB (one light spectrum) leaves chromaticity, hence d2's mean, unchanged."""
+    rgb = jnp.array([[120.0, 90.0, 60.0]])
+    for k in (0.4, 0.7, 1.5):
+        assert float(change_measure(k * rgb, rgb, 0.03, 1.0)[0]) == pytest.approx(0.0, abs=1e-9)
+    assert float(change_measure(jnp.array([[90.0, 120.0, 60.0]]), rgb, 0.03, 1.0)[0]) > 100
+
+
+def test_adaptation_tracks_drift_and_its_variance():
+    rng = np.random.default_rng(4)
+    base = _textured(rng, 32, 32)
+    bg = learn_background(np.stack([_noisy(rng, base) for _ in range(10)]))
+    still = np.ones((32, 32), bool)
+    for _ in range(300):
+        bg = adapt_background(bg, _noisy(rng, 1.1 * base), still, 0.05)
+    assert np.abs(np.asarray(bg.mean) - 1.1 * base).mean() < 0.5
+    assert float(bg.var_factor.mean()) == pytest.approx(0.05 / (2 - 0.05), rel=0.01)
+
+
+def _python_hysteresis(M, lo, hi):
+    """Reference: list of (first, last) line runs above lo holding a line above hi, on a circle."""
+    T = len(M)
+    above = M > lo
+    if above.all():
+        return [(0, T - 1)] if (M > hi).any() else []
+    start = int(np.argmin(above))
+    runs, cur = [], None
+    for k in range(start, start + T):
+        i = k % T
+        if above[i] and cur is None:
+            cur = [k, k]
+        elif above[i]:
+            cur[1] = k
+        elif cur is not None:
+            runs.append(cur)
+            cur = None
+    if cur is not None:
+        runs.append(cur)
+    return sorted((a % T, b % T) for a, b in runs if any(M[j % T] > hi[j % T] for j in range(a, b + 1)))
+
+
+_hysteresis = jax.jit(hysteresis_sectors, static_argnums=3)
+
+
+@settings(max_examples=300)
+@given(seed=st.integers(0, 2**31 - 1), T=st.sampled_from([12, 36, 360]))
+def test_hysteresis_matches_reference(seed, T):
+    rng = np.random.default_rng(seed)
+    M = np.convolve(rng.exponential(1.0, T + 4), np.ones(5) / 5, "valid")[:T]
+    lo, hi = np.full(T, np.quantile(M, 0.5)), np.full(T, np.quantile(M, 0.8))
+    s = _hysteresis(jnp.asarray(M), jnp.asarray(lo), jnp.asarray(hi), T)
+    ours = sorted((int(a) % T, int(b) % T) for a, b, v in zip(s.first, s.last, s.valid) if v)
+    assert ours == _python_hysteresis(M, lo, hi)
+
+
+def test_hysteresis_sector_across_zero_and_top_k():
+    M = np.zeros(36)
+    M[[34, 35, 0, 1]] = [3, 5, 9, 3]  # wraps around theta = 0, seeded at 0
+    M[[10, 11]] = [3, 4]  # above lower but no seed
+    M[[20, 21, 22]] = [6, 8, 6]
+    s = hysteresis_sectors(jnp.asarray(M), jnp.full(36, 2.0), jnp.full(36, 7.0), 3)
+    got = [(int(a) % 36, int(b) % 36, float(p)) for a, b, p, v in zip(s.first, s.last, s.peak, s.valid) if v]
+    assert got == [(34, 1, 9.0), (20, 22, 8.0)]
+
+
+@settings(max_examples=100)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_foot_scores_are_eq_12_brute_force(paper_detector, seed):
+    polar = paper_detector.polar
+    rng = np.random.default_rng(seed)
+    p = rng.exponential(20.0, polar.n_r)
+    ours = np.asarray(jax.jit(foot_scores)(jnp.asarray(p), polar))
+    out, ok = np.asarray(polar.hyp_out), np.asarray(polar.hyp_ok)
+    for i in rng.choice(np.nonzero(ok)[0], 10):
+        expect = p[i:out[i]].sum() - p[:i].sum() - p[out[i]:].sum()
+        assert ours[i] == pytest.approx(expect, rel=1e-9)
+    assert np.all(np.isneginf(ours[~ok]))
+
+
+def test_chi2_variates_against_scipy():
+    """n = 200000 draws each; KS at the 0.001 level."""
+    key = jax.random.key(0)
+    c = np.asarray(chi2_variate(key, 30.0, (200_000,)))
+    assert stats.kstest(c, "chi2", args=(30,)).pvalue > 1e-3
+    nc = np.asarray(noncentral_chi2_variate(jax.random.key(1), 20.0, 35.0, (200_000,)))
+    assert stats.kstest(nc, "ncx2", args=(20, 35)).pvalue > 1e-3
+
+
+def test_thresholds(paper_detector, paper_rig):
+    th, polar = paper_detector.thresholds, paper_detector.polar
+    dof = 2 * np.asarray(polar.samples)
+    np.testing.assert_allclose(stats.chi2.sf(np.asarray(th.lower), dof), float(paper_rig.detection.x_f), rtol=1e-6)
+    assert bool(th.feasible)
+    assert np.all(np.asarray(th.upper) >= np.asarray(th.lower))
+    assert float(th.seed_false_alarm) < float(paper_rig.detection.x_f)
+
+
+def test_polar_lines_sample_distinct_pixels(paper_detector):
+    polar = paper_detector.polar
+    idx, ok = np.asarray(polar.line_index), np.asarray(polar.line_ok)
+    for t in range(0, polar.n_theta, 7):
+        used = idx[t][ok[t]]
+        assert len(np.unique(used)) == len(used)
+    assert float(polar.samples.min()) > 0.6 * polar.n_r
+
+
+def _paint_person(rng, base, det, i, theta, tint=(1.15, 0.9, 0.95)):
+    """A wedge of changed colour exactly over hypothesis i's radial extent, the width of the window."""
+    polar = det.polar
+    H, W = base.shape[:2]
+    cx, cy = np.asarray(det.omni.center)
+    yy, xx = np.mgrid[:H, :W]
+    r, th = np.hypot(xx - cx, yy - cy), np.arctan2(yy - cy, xx - cx)
+    r_in = float(polar.radii[i])
+    r_out = float(polar.radii[0] + polar.hyp_out[i])
+    half = 0.5 * float(polar.window_px[i]) / r_in
+    m = (r >= r_in - 0.5) & (r < r_out - 0.5) & (np.abs(np.angle(np.exp(1j * (th - theta)))) < half)
+    img = base.copy()
+    img[m] = img[m] * np.asarray(tint)
+    return img
+
+
+@pytest.fixture(scope="module")
+def painted(paper_detector):
+    rng = np.random.default_rng(5)
+    base = _textured(rng, 480, 640)
+    bg = learn_background(np.stack([_noisy(rng, base) for _ in range(30)]))
+    return rng, base, bg, line_background(paper_detector, bg)
+
+
+@pytest.mark.parametrize("radius,theta", [(70.0, 1.0), (110.0, -2.5), (40.0, 3.1)])
+def test_detects_a_painted_person(paper_detector, painted, radius, theta):
+    rng, base, bg, lines = painted
+    polar = paper_detector.polar
+    i = int(np.argmin(np.abs(np.asarray(polar.radii) - radius)))
+    frame = _noisy(rng, _paint_person(rng, base, paper_detector, i, theta))
+    d, trace = detect(paper_detector, jnp.asarray(frame), bg, lines)
+    valid = np.asarray(d.valid)
+    assert valid.sum() == 1
+    k = int(np.argmax(valid))
+    assert float(d.r_f[k]) == pytest.approx(float(polar.hyp_r_f[i]), abs=1e-6)
+    assert math.remainder(float(d.theta_f[k]) - theta, 2 * math.pi) == pytest.approx(0.0, abs=0.02)
+    assert float(d.contrast[k]) > 50
+    step = 2 * math.pi / polar.n_theta  # the sector centre's error: its two edges' bin quantisation
+    assert step / math.sqrt(24) * (1 - 1e-9) <= float(d.sigma_theta_f[k]) < 2 * step  # one person: no excess width
+
+
+def test_empty_frame_has_no_detections(paper_detector, painted):
+    rng, base, bg, lines = painted
+    for _ in range(5):
+        d, _ = detect(paper_detector, jnp.asarray(_noisy(rng, base)), bg, lines)
+        assert not bool(np.asarray(d.valid).any())
+
+
+def test_uniform_lighting_change_is_not_a_person(paper_detector, painted):
+    """A lamp dims the whole room by 35 %: chromaticity does not move, nothing is detected."""
+    rng, base, bg, lines = painted
+    d, _ = detect(paper_detector, jnp.asarray(_noisy(rng, 0.65 * base)), bg, lines)
+    assert not bool(np.asarray(d.valid).any())
+
+
+def test_build_detector_fisheye(fisheye_rig):
+    import dataclasses
+
+    rig = dataclasses.replace(fisheye_rig, detection=dataclasses.replace(fisheye_rig.detection, foot_mc_profiles=32))
+    det = build_detector(rig)
+    assert det.polar.n_theta == 360 and det.polar.n_r > 300
+    assert bool(det.thresholds.feasible)

@@ -1,0 +1,78 @@
+"""``omnijax render``: DESIGN.md section 7's contract (video + truth.jsonl), staged output, bad input."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+from tests.paths import CONFIGS
+
+from runtime.cli import build_parser, main
+
+SIX = str(CONFIGS / "scenarios" / "six_people.toml")
+
+
+def test_render_writes_video_truth_and_world(tmp_path, capsys, six_world):
+    out = tmp_path / "r"
+    code = main(["render", "--scenario", SIX, "--frames", "4", "--out", str(out), "--png-every", "3"])
+    assert code == 0, capsys.readouterr().err
+    lines = [json.loads(line) for line in (out / "truth.jsonl").read_text().splitlines()]
+    assert [line["frame"] for line in lines] == [0, 1, 2, 3]
+    for line in lines:
+        assert len(line["persons"]) == 6
+        for p in line["persons"]:
+            assert set(p) >= {"id", "foot_m", "head_m", "r_f", "theta_f"}
+            assert len(p["foot_m"]) == 2 and len(p["head_m"]) == 3
+            assert p["head_m"][:2] == p["foot_m"]
+    world = json.loads((out / "world.json").read_text())
+    assert world["frames"] == 4 and world["seed"] == 6 and world["camera_model"] == "paraboloid"
+    assert set(world["true_rig"]) >= {"H_o_m", "r_m_px", "H_f_m", "D_c_m", "theta_c_rad"}
+    assert len(world["people"]) == 6 and sorted(p.name for p in (out / "frames").iterdir()) == ["000000.png", "000003.png"]
+    video = cv2.VideoCapture(str(out / "omni.avi"))
+    frames = []
+    while True:
+        ok, frame = video.read()
+        if not ok:
+            break
+        frames.append(frame[..., ::-1])
+    assert len(frames) == 4 and frames[0].shape == (480, 640, 3)
+    # ffv1 is lossless: the video holds exactly the world's frames (same scenario, same seed)
+    assert np.array_equal(frames[2], np.asarray(six_world.frame(2).image))
+    assert lines[2]["persons"][0]["r_f"] == pytest.approx(float(six_world.frame(2).truth.r_f[0]), abs=1e-9)
+    assert not list(tmp_path.glob(".r.partial*"))
+
+
+@pytest.mark.parametrize("args,expect", [
+    (["--frames", "0"], "--frames"),
+    (["--frames", "10000000"], "--frames"),
+    (["--frames", "2", "--png-every", "-1"], "--png-every"),
+    (["--frames", "2", "--foveal-zoom", "0"], "--foveal-zoom"),
+    (["--frames", "2", "--seed", "-3"], "--seed"),
+])
+def test_render_bad_arguments_exit_2(tmp_path, capsys, args, expect):
+    out = tmp_path / "r"
+    code = main(["render", "--scenario", SIX, "--out", str(out), *args])
+    err = capsys.readouterr().err
+    assert code == 2 and expect in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_render_missing_scenario_or_out_on_a_file_exits_2(tmp_path, capsys):
+    code = main(["render", "--scenario", str(tmp_path / "none.toml"), "--frames", "2", "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err
+    assert code == 2 and "no such config file" in err and err.count("\n") == 1
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    code = main(["render", "--scenario", SIX, "--frames", "2", "--out", str(blocker / "r")])
+    err = capsys.readouterr().err
+    assert code == 2 and "--out" in err and err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+
+
+def test_help_lists_render(capsys):
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["render", "--help"])
+    out = capsys.readouterr().out
+    assert "truth.jsonl" in out and "--png-every" in out

@@ -1,0 +1,117 @@
+"""The command line: `omnijax variance` and `omnijax validate` keep DESIGN.md section 7's contracts."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import pytest
+from tests.paths import CONFIGS, ROOT
+
+from runtime.cli import build_parser, main
+
+PAPER = str(CONFIGS / "paper.toml")
+INPUTS = ("r_f", "theta_f", "H_o", "H_f", "D_c", "theta_c", "r_m", "H_p", "R_h")
+
+
+def _variance(capsys, *args):
+    code = main(["variance", "--config", PAPER, "--json", *args])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    return json.loads(out)
+
+
+@pytest.mark.parametrize("method", ["autodiff", "analytic", "second_order", "montecarlo"])
+def test_variance_contract(capsys, method):
+    extra = ["--rel-tol", "0.05"] if method == "montecarlo" else []
+    rep = _variance(capsys, "--foot", "100", "0.7", "--method", method, *extra)
+    for key in ("pan", "tilt", "distance_m", "radius_m", "zoom", "camera_model", "valid", "inputs"):
+        assert key in rep
+    assert set(rep["var"]) >= {"sin_pan", "tan_tilt", "pan", "tilt", "cov_pan_tilt"}
+    assert set(rep["fov"]) == {"h", "v"}
+    assert rep["camera_model"] == "paraboloid" and rep["valid"] is True
+    assert list(rep["inputs"]) == list(INPUTS)
+    assert rep["inputs"]["r_f"] == {"mean": 100.0, "sigma": 1.0}
+    assert rep["inputs"]["theta_f"]["sigma"] == pytest.approx(math.radians(1.0))
+    assert rep["inputs"]["D_c"] == {"mean": 3.0, "sigma": 0.1}
+    assert all(v > 0 for k, v in rep["var"].items() if k != "cov_pan_tilt")
+
+
+def test_variance_sigma_overrides_are_echoed(capsys):
+    rep = _variance(capsys, "--foot", "100", "0.7", "--sigma-rf", "2.5", "--sigma-theta", "0.01")
+    assert rep["inputs"]["r_f"]["sigma"] == 2.5 and rep["inputs"]["theta_f"]["sigma"] == 0.01
+    base = _variance(capsys, "--foot", "100", "0.7")
+    assert rep["var"]["pan"] > base["var"]["pan"] * 0.3  # theta sigma 0.57 deg vs 1 deg: smaller, not zero
+
+
+def test_variance_flags_degenerate_geometry(capsys):
+    rep = _variance(capsys, "--foot", "219.5", "0.0")
+    assert rep["valid"] is False
+    assert all(math.isfinite(v) for v in rep["var"].values())
+
+
+@pytest.mark.parametrize("args,expect", [
+    (["--foot", "-3", "0"], "--foot"),
+    (["--foot", "10", "0", "--sigma-rf", "-1"], "--sigma-rf"),
+    (["--foot", "10", "nan"], "--foot"),
+])
+def test_variance_bad_arguments_exit_2(capsys, args, expect):
+    code = main(["variance", "--config", PAPER, *args])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == "" and expect in err and err.count("\n") == 1
+
+
+def test_help_lists_every_command(capsys):
+    with pytest.raises(SystemExit) as e:
+        build_parser().parse_args(["--help"])
+    assert e.value.code == 0
+    out = capsys.readouterr().out
+    for cmd in ("variance", "validate"):
+        assert cmd in out
+
+
+TABLE1_ROW = {"position", "pred_var_tan_tilt", "emp_var_tan_tilt", "pred_var_sin_pan", "emp_var_sin_pan", "trials"}
+
+
+def test_validate_quick_writes_report_and_maps(tmp_path):
+    # as a user runs it: a separate process (the world's renderer is type-checked by its own tests)
+    out = tmp_path / "val"
+    run = subprocess.run([sys.executable, "-m", "runtime.cli", "validate", "--config", PAPER, "--out", str(out),
+                          "--quick", "--grid-step", "24", "--trials", "8", "--fresh-trials", "8",
+                          "--empty-frames", "8"], capture_output=True, text=True, cwd=ROOT, timeout=900)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "containment:" in run.stdout
+    rep = json.loads((out / "report.json").read_text())
+    for name in ("table1", "table1_full_propagation"):
+        assert len(rep[name]) == 8
+        for row in rep[name]:
+            assert set(row) >= TABLE1_ROW and row["trials"] + row["missed"] == 8
+            assert row["pred_var_tan_tilt"] > 0 and row["emp_var_tan_tilt"] >= 0
+    assert set(rep["rates"]) >= {"x_f", "false_alarm_rate", "x_m", "miss_rate"}
+    assert 0 <= rep["rates"]["false_alarm_rate"] <= 1 and 0 <= rep["rates"]["miss_rate"] <= 1
+    assert set(rep["containment"]) >= {"p_contain", "rule", "rate", "trials"}
+    assert {(c["rule"], c["p_contain"]) for c in rep["containment"]["curve"]} >= {
+        (r, p) for r in ("paper", "calibrated") for p in (0.9, 0.95, 0.99)}
+    md = (out / "report.md").read_text()
+    for name in ("table1.png", "table1_positions.png", "containment.png", "chroma.png", "ptz_pan.png"):
+        assert f"]({name})" in md
+        assert (out / name).stat().st_size > 10_000
+    assert set(rep["chroma"]) >= {"max_rel_diff"}
+    assert set(rep["ptz"]) >= {"autodiff_vs_analytic_max_rel", "autodiff_vs_mc_max_rel", "analytic_vs_mc_max_rel"}
+    assert rep["chroma"]["eq5_vs_jacobian_max_rel"] < 1e-12
+    assert rep["chroma"]["max_rel_diff"] < 0.1
+    assert rep["ptz"]["autodiff_vs_mc_max_rel"] < 0.2
+    for name in ("chroma.png", "ptz_sin_pan.png", "ptz_tan_tilt.png", "ptz_pan.png", "ptz_tilt.png"):
+        assert (out / name).stat().st_size > 10_000
+    assert not list(tmp_path.glob(".*partial*"))
+
+
+def test_validate_failure_leaves_nothing_behind(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text((CONFIGS / "paper.toml").read_text().replace("[room]", "[room]\nfloor = 1"))
+    out = tmp_path / "val"
+    assert main(["validate", "--config", str(bad), "--out", str(out), "--quick"]) == 2
+    assert not out.exists() and not list(tmp_path.glob(".*partial*"))
+    assert "room.floor: unknown key" in capsys.readouterr().err

@@ -1,0 +1,158 @@
+"""The real-time runtime: ``omnijax demo`` (contract, faults injected and counted), ``omnijax run``
+on a small video file with an emulated PTZ, Ctrl-C handling, and the pieces they are built from.
+
+The demo runs once (module fixture, 200 frames, every frame processed) with a broken frame, a frame
+of the wrong size, the PTZ port unplugged for 0.5 s and an early end; its raw omni frames are
+recorded and replayed by the ``run`` test, which is stopped by a real SIGTERM. Both run as child
+processes, as users run them (and outside pytest's jaxtyping import hook).
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from runtime.cli import main
+from runtime.realtime.faults import FaultPlan
+from runtime.realtime.loop import Samples
+from runtime.realtime.sources import Capture, FaultySource, Source
+
+from tests.paths import ROOT
+PAPER = str(ROOT / "configs" / "paper.toml")
+FAULTS = "broken@100,wrong-size@105,ptz-unplug@110:0.5,end@190"
+
+
+class ListSource(Source):
+    def __init__(self, images, fps=None):
+        self.images, self.fps, self.name = images, fps, "list"
+
+    def frames(self):
+        yield from self.images
+
+
+def test_fault_plan_parses_and_rejects():
+    plan = FaultPlan.parse("broken@3, broken@5,wrong-size@7,ptz-unplug@9:1.5,end@20")
+    assert plan.broken == {3, 5} and plan.wrong_size == {7} and plan.ptz_unplug == {9: 1.5} and plan.end == 20
+    assert FaultPlan.parse("").empty
+    for bad in ("broken", "lost@3", "broken@x", "end@3:2", "ptz-unplug@3:0", "broken@-1"):
+        with pytest.raises(ValueError):
+            FaultPlan.parse(bad)
+
+
+def test_capture_counts_injected_frame_faults():
+    img = np.zeros((4, 6, 3), np.uint8)
+    source = FaultySource(ListSource([img] * 10), FaultPlan.parse("broken@2,wrong-size@4,end@8"))
+    got = []
+    with Capture(source, paced=False, shape=img.shape) as cap:
+        while (f := cap.get(timeout=2)) is not None:
+            got.append(f)
+    assert [f.index for f in got] == list(range(8))
+    assert got[2].image is None and got[4].image.shape == (2, 3, 3)
+    assert cap.counts["broken"] == 1 and cap.counts["wrong_size"] == 1 and cap.counts["dropped"] == 0
+    assert cap.ended
+
+
+def test_samples_ring_buffer_keeps_the_latest():
+    s = Samples(capacity=4)
+    for v in range(10):
+        s.append(float(v))
+    assert len(s) == 10 and sorted(s.values()) == [6.0, 7.0, 8.0, 9.0]
+    assert list(s.recent(2)) == [8.0, 9.0]
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["run", "no-such-video.mp4", "--config", PAPER, "--out", "X"], "no such video file"),
+    (["run", ".", "--config", PAPER, "--out", "X", "--faults", "ptz-unplug@3"], "ptz-unplug"),
+    (["demo", "--out", "X", "--frames", "10"], "--frames"),
+    (["demo", "--out", "X", "--scenario", "nowhere"], "--scenario"),
+    (["demo", "--out", "X", "--faults", "broken@"], "--faults"),
+])
+def test_bad_input_is_one_line_and_exit_2(argv, expected, capsys, tmp_path):
+    argv = [str(tmp_path / a) if a == "X" else a for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and expected in err[0]
+    assert not (tmp_path / "X").exists()
+
+
+def omnijax(*args: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "runtime.cli", *args], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+@pytest.fixture(scope="module")
+def demo_out(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo") / "out"
+    proc = omnijax("demo", "--out", str(out), "--frames", "200", "--pace", "all", "--background-step", "1",
+                   "--screenshot", "50", "--inset-every", "20", "--faults", FAULTS, "--record", "--quiet")
+    stdout, stderr = proc.communicate(timeout=400)
+    assert proc.returncode == 0, stderr[-2000:]
+    assert f"demo outputs: {out}" in stdout
+    return out
+
+
+def test_demo_contract(demo_out):
+    s = json.loads((demo_out / "summary.json").read_text())
+    assert s["frames"] > 100 and s["fps"] > 0
+    assert s["latency_ms"]["p50"] > 0 and s["latency_ms"]["p99"] >= s["latency_ms"]["p50"]
+    assert {"commands", "errors", "reconnects"} <= set(s["ptz"]) and s["ptz"]["commands"] > 0
+    assert 0 <= s["detection"]["miss_rate"] <= 1 and 0 <= s["detection"]["false_alarm_rate"] <= 1
+    assert 0 < s["foot_error_m"]["rms"] < 0.5
+    c = s["containment"]
+    assert c["p_contain"] == 0.99 and c["trials"] > 50 and 0 <= c["rate"] <= 1
+    assert set(c["rules"]) == {"paper", "calibrated"} and s["face_px"]["median"] > 0
+    assert s["ptz_homed"] and s["emulator"]["pan_deg"] == 0 and s["emulator"]["zoom"] == 1
+    log = [json.loads(line) for line in (demo_out / "log.jsonl").read_text().splitlines()]
+    assert len(log) == s["frames"] + s["counts"]["broken"] + s["counts"]["wrong_size"]
+    video = cv2.VideoCapture(str(demo_out / s["outputs"]["video"]))
+    ok, img = video.read()
+    assert ok and img.shape == (480, 960, 3)
+    assert (demo_out / "view.png").is_file()
+
+
+def test_demo_counts_each_injected_fault(demo_out):
+    s = json.loads((demo_out / "summary.json").read_text())
+    f = s["faults"]
+    assert f["injected"] == FaultPlan.parse(FAULTS).describe()
+    assert f["broken_frames"] == 1 and f["wrong_size_frames"] == 1 and f["ptz_unplugged"] == 1
+    assert f["source_ended"] and s["stop_reason"] == "source ended"
+    assert s["ptz"]["reconnects"] >= 1  # the port came back and the driver reopened it
+    log = [json.loads(line) for line in (demo_out / "log.jsonl").read_text().splitlines()]
+    faults = [r["fault"] for r in log if "fault" in r]
+    assert any("broken" in x for x in faults) and any("expected 640x480" in x for x in faults)
+    assert any("unplugged" in x for x in faults)
+    assert max(r["frame"] for r in log) < 190
+
+
+def test_run_on_a_video_with_the_emulator_stops_cleanly_on_sigterm(demo_out, tmp_path):
+    """``omnijax run`` on the demo's recorded omni video, steering an emulated PTZ; SIGTERM part-way:
+    the PTZ goes home, the summary and the log are written, the exit code is 0."""
+    from runtime.ptz import PtyEmulator, default_profile
+
+    out = tmp_path / "run"
+    with PtyEmulator(default_profile("visca")) as emulator:
+        proc = omnijax("run", str(demo_out / "omni.avi"), "--config", PAPER, "--ptz", emulator.path,
+                       "--out", str(out), "--pace", "all", "--no-video", "--quiet")
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline and proc.poll() is None:
+            logs = list(tmp_path.glob(".run.partial-*/log.jsonl"))
+            if logs and len(logs[0].read_text().splitlines()) >= 40:
+                proc.send_signal(signal.SIGTERM)
+                break
+            time.sleep(0.05)
+        _, stderr = proc.communicate(timeout=60)
+        state = emulator.state()
+    assert proc.returncode == 0, stderr[-2000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["stop_reason"] == "SIGTERM" and 40 <= s["frames"] < 140
+    assert s["ptz"]["commands"] > 0 and s["ptz_homed"]
+    assert state["pan_deg"] == 0 and state["tilt_deg"] == 0 and state["zoom"] == 1
+    assert len((out / "log.jsonl").read_text().splitlines()) == s["frames"]
