@@ -9,7 +9,7 @@ OUT    ?= out
 
 help:
 	@echo "make demo       create .venv, install, run the whole system on a synthetic scene with an emulated PTZ"
-	@echo "make test       create .venv, install, run the test suite (what CI runs)"
+	@echo "make test       create .venv, install, lint (ruff), run the test suite (what CI runs)"
 	@echo "make test-slow  the long statistical tests as well"
 	@echo "make bench      speed benchmarks, pinned to one core"
 
@@ -25,6 +25,7 @@ demo: $(STAMP)
 	@echo "open $(OUT)/demo/annotated.mp4 (the operator's view) and $(OUT)/demo/summary.json (the scores)"
 
 test: $(STAMP)
+	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -m "not slow"
 
 test-slow: $(STAMP)

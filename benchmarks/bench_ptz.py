@@ -32,11 +32,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from tests.runtime.ptz import fuzz as ptz_fuzz  # noqa: E402
-from runtime.ptz import PtzDriver, default_profile, parse_profile  # noqa: E402
-from runtime.ptz.profile import DEFAULT_PROFILES, DEVICES_DIR  # noqa: E402
+from runtime.ptz import PtzDriver, default_profile, parse_profile
+from runtime.ptz.profile import DEFAULT_PROFILES, DEVICES_DIR
+from tests.runtime.ptz import fuzz as ptz_fuzz
 
 OMNIJAX = str(Path(sys.executable).parent / "omnijax")
 PROTOCOLS = ("visca", "pelco-d")
@@ -168,7 +168,7 @@ def unplug(trials: int, outage_s: float, seed: int) -> dict:
                         written_during = ptz.counters["commands"] - written
                         reconnects = ptz.counters["reconnects"]
                         emu = Emulator(protocol, link)
-                        _wait(lambda: ptz.counters["reconnects"] > reconnects, 30)
+                        _wait(lambda before=reconnects: ptz.counters["reconnects"] > before, 30)
                         t_conn = time.monotonic()
                         ok = ptz.wait_reached(timeout=30)
                         t_reached = time.monotonic()
@@ -185,7 +185,7 @@ def unplug(trials: int, outage_s: float, seed: int) -> dict:
                     counters = ptz.counters
             finally:
                 emu.close()
-        col = lambda k: [r[k] for r in rows]  # noqa: E731
+        col = lambda k, rows=rows: [r[k] for r in rows]
         out[protocol] = {
             "trials": trials, "outage_s": outage_s,
             "reconnect_after_restart_s": {"median": float(np.median(col("reconnect_after_restart_s"))),

@@ -28,10 +28,11 @@ from runtime.bench.timing import pin_to_one_core, time_calls
 
 pin_to_one_core()
 
-import equinox as eqx  # noqa: E402
-import jax  # noqa: E402
+import equinox as eqx
+import jax
+
 jax.config.update("jax_enable_x64", True)  # as the omnijax command runs
-import numpy as np  # noqa: E402
+import numpy as np
 
 from omnijax.world import build_world
 from runtime.files import load_scenario

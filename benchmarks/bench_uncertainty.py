@@ -18,9 +18,10 @@ from runtime.bench.timing import pin_to_one_core, time_calls
 
 pin_to_one_core()
 
-import jax  # noqa: E402
+import jax
+
 jax.config.update("jax_enable_x64", True)  # as the omnijax command runs
-import numpy as np  # noqa: E402
+import numpy as np
 
 from omnijax import pointing_covariance, world_to_image
 from runtime.files import load_rig
@@ -72,8 +73,8 @@ def main() -> None:
                  "cores": 1}
 
     for method in ("autodiff", "analytic", "second_order"):
-        one = lambda: pointing_covariance(x_one, sigma, prof, method).cov.block_until_ready()  # noqa: E731
-        grid = lambda: pointing_covariance(x_grid, sigma, prof, method).cov.block_until_ready()  # noqa: E731
+        one = lambda method=method: pointing_covariance(x_one, sigma, prof, method).cov.block_until_ready()
+        grid = lambda method=method: pointing_covariance(x_grid, sigma, prof, method).cov.block_until_ready()
         res[method] = {"one_point_ms": time_calls(one, 2000 if method != "second_order" else 300),
                        "grid_ms": time_calls(grid, 30 if method != "second_order" else 5)}
     x_np, s_np = np.asarray(x_grid), np.asarray(sigma)

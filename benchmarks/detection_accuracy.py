@@ -22,11 +22,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import jax  # noqa: E402
+import jax
+
 jax.config.update("jax_enable_x64", True)  # as the omnijax command runs
-import numpy as np  # noqa: E402
-from scipy import stats  # noqa: E402
-from tqdm import tqdm  # noqa: E402
+import numpy as np
+from scipy import stats
+from tqdm import tqdm
 
 from omnijax import (
     adapt_background,
@@ -38,8 +39,7 @@ from omnijax import (
     polar_range,
     sector_mask,
 )
-from omnijax.world import build_world
-from omnijax.world import parse_scenario
+from omnijax.world import build_world, parse_scenario
 from runtime.files import load_rig, load_scenario, read_toml
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "configs" / "scenarios"

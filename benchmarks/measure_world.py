@@ -24,9 +24,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import jax  # noqa: E402
+import jax
+
 jax.config.update("jax_enable_x64", True)  # as the omnijax command runs
-import numpy as np  # noqa: E402
+import numpy as np
 
 from omnijax import world_to_image
 from omnijax.world import build_world, effective_sigma, omni_rays

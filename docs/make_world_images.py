@@ -13,15 +13,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import cv2  # noqa: E402
-import jax  # noqa: E402
-import numpy as np  # noqa: E402
+import cv2
+import jax
+import numpy as np
 
 jax.config.update("jax_enable_x64", True)  # as the omnijax command runs
 
 from omnijax.world import build_world, render_foveal
 from runtime.files import load_scenario
-from runtime.validation.truth import truth_line, true_aim
+from runtime.validation.truth import true_aim, truth_line
 
 OUT = ROOT / "docs" / "world"
 SCENARIOS = ROOT / "configs" / "scenarios"
@@ -61,7 +61,8 @@ def main() -> None:
     rig, sc = load_scenario(SCENARIOS / "fisheye_office.toml")
     fisheye = build_world(rig, sc, n_frames=1)
     image = circle(fisheye, np.asarray(fisheye.frame(0).image))
-    save("fisheye_office.png", cv2.resize(image, (image.shape[1] // 2, image.shape[0] // 2), interpolation=cv2.INTER_AREA))
+    half = (image.shape[1] // 2, image.shape[0] // 2)
+    save("fisheye_office.png", cv2.resize(image, half, interpolation=cv2.INTER_AREA))
 
 
 if __name__ == "__main__":

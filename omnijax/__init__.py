@@ -21,13 +21,49 @@ start (``jax.config.update("jax_enable_x64", True)``); a program of your own sho
 (docs/design.md, "Precision").
 """
 
+from .aim import (
+    Aim as Aim,
+    aim as aim,
+    aim_with_covariance as aim_with_covariance,
+)
+from .calibration import (
+    GLOBAL_NAMES as GLOBAL_NAMES,
+    PARAM_NAMES as PARAM_NAMES,
+    PARAM_UNITS as PARAM_UNITS,
+    RIM_NAMES as RIM_NAMES,
+    CalibrationProblem as CalibrationProblem,
+    Observations as Observations,
+    RigFit as RigFit,
+    RimEdges as RimEdges,
+    RimFit as RimFit,
+    RimPrior as RimPrior,
+    SimulationSettings as SimulationSettings,
+    draw_calibration_truth as draw_calibration_truth,
+    fit_circle as fit_circle,
+    fit_rig as fit_rig,
+    fit_rim as fit_rim,
+    rim_edges as rim_edges,
+    simulate_calibration as simulate_calibration,
+    with_mounting_sigma as with_mounting_sigma,
+)
+from .camera import (
+    PROFILES as PROFILES,
+    Equidistant as Equidistant,
+    Equisolid as Equisolid,
+    OCamCalib as OCamCalib,
+    OCamCalibFile as OCamCalibFile,
+    OmniCamera as OmniCamera,
+    Paraboloid as Paraboloid,
+    RadialProfile as RadialProfile,
+    parse_ocamcalib as parse_ocamcalib,
+)
 from .config import (
-    ConfigError as ConfigError,
-    Detection as Detection,
-    Foveal as Foveal,
     INPUT_NAMES as INPUT_NAMES,
     INPUT_UNITS as INPUT_UNITS,
     LAYOUT_NAMES as LAYOUT_NAMES,
+    ConfigError as ConfigError,
+    Detection as Detection,
+    Foveal as Foveal,
     LayoutSearch as LayoutSearch,
     Lens as Lens,
     Person as Person,
@@ -36,38 +72,14 @@ from .config import (
     Sigmas as Sigmas,
     parse_rig as parse_rig,
 )
-from .camera import (
-    Equidistant as Equidistant,
-    Equisolid as Equisolid,
-    OCamCalib as OCamCalib,
-    OCamCalibFile as OCamCalibFile,
-    OmniCamera as OmniCamera,
-    PROFILES as PROFILES,
-    Paraboloid as Paraboloid,
-    RadialProfile as RadialProfile,
-    parse_ocamcalib as parse_ocamcalib,
-)
-from .geometry import (
-    D_P_MIN as D_P_MIN,
-    PHI_FLOOR_MAX as PHI_FLOOR_MAX,
-    Pointing as Pointing,
-    floor_radius as floor_radius,
-    foveal_offsets as foveal_offsets,
-    head_image_radius as head_image_radius,
-    image_to_floor as image_to_floor,
-    person_image_extent as person_image_extent,
-    point_image_radius as point_image_radius,
-    pointing as pointing,
-    world_to_image as world_to_image,
-)
 from .detection import (
+    MEASURES as MEASURES,
     Background as Background,
-    DetectionTrace as DetectionTrace,
     Detections as Detections,
+    DetectionTrace as DetectionTrace,
     Detector as Detector,
     FootSigmaTable as FootSigmaTable,
     LineBackground as LineBackground,
-    MEASURES as MEASURES,
     PolarIndex as PolarIndex,
     Sectors as Sectors,
     Thresholds as Thresholds,
@@ -91,10 +103,23 @@ from .detection import (
     sensor_noise as sensor_noise,
     window_profile as window_profile,
 )
+from .geometry import (
+    D_P_MIN as D_P_MIN,
+    PHI_FLOOR_MAX as PHI_FLOOR_MAX,
+    Pointing as Pointing,
+    floor_radius as floor_radius,
+    foveal_offsets as foveal_offsets,
+    head_image_radius as head_image_radius,
+    image_to_floor as image_to_floor,
+    person_image_extent as person_image_extent,
+    point_image_radius as point_image_radius,
+    pointing as pointing,
+    world_to_image as world_to_image,
+)
 from .uncertainty import (
     METHODS as METHODS,
-    MonteCarloCovariance as MonteCarloCovariance,
     OUTPUT_NAMES as OUTPUT_NAMES,
+    MonteCarloCovariance as MonteCarloCovariance,
     PointingCovariance as PointingCovariance,
     gum_second_order as gum_second_order,
     pointing_covariance as pointing_covariance,
@@ -110,29 +135,4 @@ from .zoom import (
     head_half_size as head_half_size,
     paper_fov as paper_fov,
     rectangle_probability as rectangle_probability,
-)
-from .aim import (
-    Aim as Aim,
-    aim as aim,
-    aim_with_covariance as aim_with_covariance,
-)
-from .calibration import (
-    CalibrationProblem as CalibrationProblem,
-    GLOBAL_NAMES as GLOBAL_NAMES,
-    Observations as Observations,
-    PARAM_NAMES as PARAM_NAMES,
-    PARAM_UNITS as PARAM_UNITS,
-    RIM_NAMES as RIM_NAMES,
-    RigFit as RigFit,
-    RimEdges as RimEdges,
-    RimFit as RimFit,
-    RimPrior as RimPrior,
-    SimulationSettings as SimulationSettings,
-    draw_calibration_truth as draw_calibration_truth,
-    fit_circle as fit_circle,
-    fit_rig as fit_rig,
-    fit_rim as fit_rim,
-    rim_edges as rim_edges,
-    simulate_calibration as simulate_calibration,
-    with_mounting_sigma as with_mounting_sigma,
 )

@@ -6,34 +6,36 @@ an unconstrained map of the configured box, the vmapped landscape grid that
 checks it, and per-point arrays for the maps. Imports ``omnijax`` only.
 """
 
-from ._floor import PAD_TO, FloorGrid, floor_grid
+from ._floor import (
+    PAD_TO as PAD_TO,
+    FloorGrid as FloorGrid,
+    floor_grid as floor_grid,
+)
 from ._objective import (
-    OBJECTIVES,
-    SENSE,
-    STATISTICS,
-    FloorValues,
-    Layout,
-    configured_layout,
-    floor_statistic,
-    floor_values,
-    layout_objective,
-    place,
-    summarise,
+    OBJECTIVES as OBJECTIVES,
+    SENSE as SENSE,
+    STATISTICS as STATISTICS,
+    FloorValues as FloorValues,
+    Layout as Layout,
+    configured_layout as configured_layout,
+    floor_statistic as floor_statistic,
+    floor_values as floor_values,
+    layout_objective as layout_objective,
+    place as place,
+    summarise as summarise,
 )
 from ._search import (
-    BATCH,
-    BOUND_TOL,
-    SHARPNESS,
-    Box,
-    Evaluator,
-    Landscape,
-    SearchResult,
-    StartResult,
-    compile_minimiser,
-    landscape_layouts,
-    search,
-    search_box,
-    start_points,
+    BATCH as BATCH,
+    BOUND_TOL as BOUND_TOL,
+    SHARPNESS as SHARPNESS,
+    Box as Box,
+    Evaluator as Evaluator,
+    Landscape as Landscape,
+    SearchResult as SearchResult,
+    StartResult as StartResult,
+    compile_minimiser as compile_minimiser,
+    landscape_layouts as landscape_layouts,
+    search as search,
+    search_box as search_box,
+    start_points as start_points,
 )
-
-__all__ = [n for n in dir() if not n.startswith("_")]

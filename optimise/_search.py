@@ -87,7 +87,7 @@ class Box(eqx.Module):
 
     def layout(self, x: Float[Array, " k"], base: Layout) -> Layout:
         """``base`` with the varied variables set to ``x``."""
-        return eqx.tree_at(lambda l: tuple(getattr(l, n) for n in self.names), base,
+        return eqx.tree_at(lambda lay: tuple(getattr(lay, n) for n in self.names), base,
                            tuple(x[i] for i in range(len(self.names))))
 
     def values(self, layout: Layout) -> np.ndarray:
@@ -162,7 +162,7 @@ class Evaluator:
             fv = jax.tree.map(lambda a: np.asarray(a)[:, :self.floor.size], fv)
             summ = {k: np.asarray(v) for k, v in summ.items()}
             for j in range(len(chunk)):
-                values.append(jax.tree.map(lambda a: a[j], fv))
+                values.append(jax.tree.map(lambda a, j=j: a[j], fv))
                 summaries.append({k: float(v[j]) for k, v in summ.items()})
         return values, summaries
 
@@ -315,7 +315,8 @@ def search(rig: Rig, floor: FloorGrid, progress: Progress | None = None,
     polished = False
     if sense * grid_objective < sense * best.objective:
         x, steps, ok = _run_bfgs(bfgs, rig, box, base, floor, box.inset(grid_x))
-        polish = StartResult(start=box.inset(grid_x), x=x, objective=evaluate([box.layout(jnp.asarray(x), base)])[1][0][key],
+        polished = evaluate([box.layout(jnp.asarray(x), base)])[1][0][key]
+        polish = StartResult(start=box.inset(grid_x), x=x, objective=polished,
                              steps=steps, converged=ok)
         polished = sense * polish.objective < sense * best.objective
         if polished:

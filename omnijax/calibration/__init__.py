@@ -1,12 +1,12 @@
 """Calibration kernels: the omni image's rim, and the rig (heights, distances, PTZ zeros) by least squares."""
 
 from ._rig_fit import (
-    CalibrationProblem as CalibrationProblem,
     GLOBAL_NAMES as GLOBAL_NAMES,
-    Observations as Observations,
     PARAM_NAMES as PARAM_NAMES,
     PARAM_UNITS as PARAM_UNITS,
     RIM_NAMES as RIM_NAMES,
+    CalibrationProblem as CalibrationProblem,
+    Observations as Observations,
     RigFit as RigFit,
     RimPrior as RimPrior,
     SimulationSettings as SimulationSettings,

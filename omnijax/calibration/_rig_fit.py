@@ -215,7 +215,7 @@ def with_mounting_sigma(cov: Float[Array, "*b 4 4"], pan, tilt, sigma_pan_zero, 
     one, zero = jnp.ones_like(pan), jnp.zeros_like(pan)
     g_pan = jnp.stack([one, zero, jnp.cos(pan), zero], axis=-1)
     g_tilt = jnp.stack([zero, one, zero, 1.0 / jnp.cos(tilt) ** 2], axis=-1)
-    outer = lambda g, s: s[..., None, None] ** 2 * g[..., :, None] * g[..., None, :]  # noqa: E731
+    outer = lambda g, s: s[..., None, None] ** 2 * g[..., :, None] * g[..., None, :]
     return cov + outer(g_pan, jnp.asarray(sigma_pan_zero)) + outer(g_tilt, jnp.asarray(sigma_tilt_zero))
 
 

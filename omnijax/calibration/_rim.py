@@ -115,7 +115,7 @@ def rim_edges(
     window = (idx[None, :] <= k_out[:, None]) & (idx[None, :] >= k_out[:, None] - 2 * half)
     k = jnp.argmax(jnp.where(window, drop, -jnp.inf), axis=1)
     k_in = jnp.clip(k, 1, radii.shape[0] - 2)
-    take = lambda a, i: jnp.take_along_axis(a, i[:, None], axis=1)[:, 0]  # noqa: E731
+    take = lambda a, i: jnp.take_along_axis(a, i[:, None], axis=1)[:, 0]
     d0, dm, dp = take(drop, k_in), take(drop, k_in - 1), take(drop, k_in + 1)
     finite = jnp.isfinite(dm) & jnp.isfinite(dp)
     denom = jnp.where(finite, dm - 2 * d0 + dp, -1.0)

@@ -25,7 +25,7 @@ from typing import ClassVar
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, ArrayLike
+from jaxtyping import Array, ArrayLike, Float
 
 HALF_PI = math.pi / 2
 

@@ -24,7 +24,7 @@ from annotated_types import Len
 from jaxtyping import Array, Float
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from ..camera import OCamCalib, OmniCamera, PROFILES, parse_ocamcalib
+from ..camera import PROFILES, OCamCalib, OmniCamera, parse_ocamcalib
 
 # --------------------------------------------------------------------------------------
 # Kernel-side types

@@ -1,8 +1,8 @@
 """The people detector: chromaticity, change measure, background, polar indexing, the foot (eq 5-12)."""
 
 from ._change import (
-    Background as Background,
     MEASURES as MEASURES,
+    Background as Background,
     adapt_background as adapt_background,
     change_image as change_image,
     change_measure as change_measure,
@@ -15,8 +15,8 @@ from ._chroma import (
     chromaticity_covariance as chromaticity_covariance,
 )
 from ._detector import (
-    DetectionTrace as DetectionTrace,
     Detections as Detections,
+    DetectionTrace as DetectionTrace,
     Detector as Detector,
     LineBackground as LineBackground,
     build_detector as build_detector,

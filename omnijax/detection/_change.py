@@ -101,7 +101,9 @@ def reference_terms(background: Float[ArrayLike, "*b 3"], var_factor: Float[Arra
     return ReferenceTerms(r=r, g=g, rr=v * rr, rg=v * rg, gg=v * gg, unclipped=_inside(planes, 1.0, 254.0))
 
 
-def change_against(current: Float[ArrayLike, "*b 3"], ref: ReferenceTerms, sigma: Float[ArrayLike, "*#b"]) -> Float[Array, "*b"]:
+def change_against(
+    current: Float[ArrayLike, "*b 3"], ref: ReferenceTerms, sigma: Float[ArrayLike, "*#b"]
+) -> Float[Array, "*b"]:
     """d^2 of eq 6-7 (corrected) of ``current`` against precomputed background terms."""
     cur = _planes(current)
     r1, g1, a1, b1, c1 = chromaticity_planes(*cur)
@@ -154,7 +156,9 @@ def grey_change_measure(current: Float[ArrayLike, "*b 3"], background: Float[Arr
 MEASURES = {"chromaticity": (change_measure, 2), "grey": (grey_change_measure, 1)}
 
 
-def change_image(frame: UInt8[ArrayLike, "H W 3"], bg: Background, measure: str = "chromaticity") -> Float[Array, "H W"]:
+def change_image(
+    frame: UInt8[ArrayLike, "H W 3"], bg: Background, measure: str = "chromaticity"
+) -> Float[Array, "H W"]:
     """d^2 at every pixel of ``frame`` (for overlays and per-pixel masks)."""
     return MEASURES[measure][0](jnp.asarray(frame, jnp.float32), bg.mean, bg.var_factor, bg.sigma)
 

@@ -22,8 +22,8 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, PRNGKeyArray, UInt8
 
 from ..camera import OmniCamera
-from ._change import MEASURES, Background, ReferenceTerms, change_against, reference_terms
 from ..config import Rig
+from ._change import MEASURES, Background, ReferenceTerms, change_against, reference_terms
 from ._foot import FootSigmaTable, build_foot_sigma_table, foot_estimate, foot_sigma_lookup
 from ._indexing import Thresholds, build_thresholds, gather_rgb, hysteresis_sectors, window_profile
 from ._polar import PolarIndex, build_polar_index

@@ -87,7 +87,7 @@ def build_foot_sigma_table(polar: PolarIndex, key: PRNGKeyArray, n_profiles: int
     keys = jax.random.split(key, ii.size)
     # one cell at a time (lax.map): vmapping the Gamma sampler's rejection loops over every
     # cell at once makes all of them wait for the slowest lane
-    cell = lambda args: foot_sigma_mc(polar, args[0], args[1], args[2], n_profiles, dof_per_sample, sigma_H_p)  # noqa: E731
+    cell = lambda args: foot_sigma_mc(polar, args[0], args[1], args[2], n_profiles, dof_per_sample, sigma_H_p)
     table = jax.jit(lambda a, b, k: jax.lax.map(cell, (a, b, k)))(ii.ravel(), cc.ravel(), keys)
     return FootSigmaTable(index=grid.astype(jnp.float64), log_contrast=jnp.log(c), sigma=table.reshape(ii.shape))
 

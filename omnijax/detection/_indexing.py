@@ -6,8 +6,9 @@
 - The lower threshold ``T_l`` is its ``1 - x_f`` quantile (eq 10).
 - The upper threshold ``T_u`` (a sector's seed) is the ``x_m`` quantile of a person's
   line sum: eq 9 corrected, ``chi2(dof - 2k) + noncentral chi2(2k, k c_min)``, with ``k``
-  the person's samples on the line simulated from the person priors over the room. If ``T_u`` falls below ``T_l``, ``c_min`` is too low for
-  both rates; the seed is then raised to ``T_l`` and ``feasible`` is False.
+  the person's samples on the line simulated from the person priors over the room. If ``T_u``
+  falls below ``T_l``, ``c_min`` is too low for both rates; the seed is then raised to ``T_l``
+  and ``feasible`` is False.
 - psi1: sectors are the circular runs of ``M > T_l`` that hold an ``M > T_u`` seed.
 - psi2: along a sector's centre line, ``d2_bar(r)`` sums d^2 over the window of a
   person's width across the line; its background is chi-square with 2 x window.
@@ -24,9 +25,9 @@ from scipy.optimize import brentq
 from scipy.stats import chi2, ncx2
 
 from ..camera import OmniCamera
-from ._change import MEASURES
 from ..config import Rig
 from ..geometry import person_image_extent
+from ._change import MEASURES
 from ._polar import PolarIndex, body_radius
 
 #: Two-sided 99 % normal quantile: a sector's width is taken as theta_f's 99 % interval.
@@ -83,7 +84,7 @@ def upper_threshold(dof: float, k: np.ndarray, c_min: float, x_m: float) -> floa
     """
     ks, counts = np.unique(np.round(k), return_counts=True)
     w = counts / counts.sum()
-    cdf = lambda t: float(np.sum(w * ncx2.cdf(t, dof, np.maximum(ks, 1.0) * c_min)))  # noqa: E731
+    cdf = lambda t: float(np.sum(w * ncx2.cdf(t, dof, np.maximum(ks, 1.0) * c_min)))
     lo, hi = chi2.ppf(1e-9, dof), ncx2.ppf(1 - 1e-9, dof, ks.max() * c_min)
     return brentq(lambda t: cdf(t) - x_m, lo, hi, xtol=1e-6 * hi)
 

@@ -94,7 +94,7 @@ def _geometry_tables(rig: Rig, radii, theta):
     R_floor = floor_radius(radii, omni.r_m, omni.H_o, omni.profile)[0]
     rho = body_radius(rig)
     R_axis = R_floor + 0.25 * jnp.pi * rho
-    outer = lambda H_p: person_image_extent(R_axis, omni, H_p, rig.person.R_h, rho)[1]  # noqa: E731
+    outer = lambda H_p: person_image_extent(R_axis, omni, H_p, rig.person.R_h, rho)[1]
     r_out, dout_dH = jax.jvp(outer, (rig.person.H_p,), (jnp.ones_like(rig.person.H_p),))
     r_f = point_image_radius(R_axis, 0.0, omni.r_m, omni.H_o, omni.profile)
     width = 2 * jnp.arcsin(jnp.minimum(rho / R_axis, 1.0))  # a vertical cylinder's azimuth span
@@ -110,7 +110,8 @@ def build_polar_index(rig: Rig) -> PolarIndex:
     radii = r_min + np.arange(n_r, dtype=float)
     theta = 2 * np.pi * np.arange(det.n_theta) / det.n_theta
 
-    x, y, R_floor, r_out, hyp_r_f, dout_dH, hyp_width = (np.asarray(v) for v in _geometry_tables(rig, jnp.asarray(radii), jnp.asarray(theta)))
+    tables = _geometry_tables(rig, jnp.asarray(radii), jnp.asarray(theta))
+    x, y, R_floor, r_out, hyp_r_f, dout_dH, hyp_width = (np.asarray(v) for v in tables)
     xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
     inside = (xi >= 0) & (xi < W_img) & (yi >= 0) & (yi < H_img)
     flat = np.where(inside, yi * W_img + xi, 0)

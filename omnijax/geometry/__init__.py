@@ -4,6 +4,10 @@ from ._floor import (
     floor_measurement as floor_measurement,
     image_position as image_position,
 )
+from ._person import (
+    SHOULDER as SHOULDER,
+    person_image_extent as person_image_extent,
+)
 from ._pointing import (
     D_P_MIN as D_P_MIN,
     PHI_FLOOR_MAX as PHI_FLOOR_MAX,
@@ -15,8 +19,4 @@ from ._pointing import (
     point_image_radius as point_image_radius,
     pointing as pointing,
     world_to_image as world_to_image,
-)
-from ._person import (
-    SHOULDER as SHOULDER,
-    person_image_extent as person_image_extent,
 )

@@ -28,12 +28,14 @@ def _image_point(xy, r_m, H_o, profile):
 
 
 @jax.jit
-def floor_measurement(rig: Rig, r_f, theta_f, sigma_r_f, sigma_theta_f) -> tuple[Float[Array, "*b 2"], Float[Array, "*b 2 2"]]:
+def floor_measurement(
+    rig: Rig, r_f, theta_f, sigma_r_f, sigma_theta_f
+) -> tuple[Float[Array, "*b 2"], Float[Array, "*b 2 2"]]:
     """Floor position (m) of detections and its covariance from the detection sigmas (eq 1, autodiff)."""
     o = rig.omni
     rt = jnp.stack(jnp.broadcast_arrays(jnp.asarray(r_f, float), jnp.asarray(theta_f, float)), -1)
     s2 = jnp.stack(jnp.broadcast_arrays(jnp.asarray(sigma_r_f, float) ** 2, jnp.asarray(sigma_theta_f, float) ** 2), -1)
-    f = lambda v: _floor_point(v, o.r_m, o.H_o, o.profile)  # noqa: E731
+    f = lambda v: _floor_point(v, o.r_m, o.H_o, o.profile)
     flat, s2f = rt.reshape(-1, 2), s2.reshape(-1, 2)
     z = jax.vmap(f)(flat)
     J = jax.vmap(jax.jacfwd(f))(flat)
@@ -45,7 +47,7 @@ def floor_measurement(rig: Rig, r_f, theta_f, sigma_r_f, sigma_theta_f) -> tuple
 def image_position(rig: Rig, xy: Float[Array, "*b 2"], cov: Float[Array, "*b 2 2"]) -> tuple[Array, Array]:
     """(r_f, theta_f) of floor positions and their 2 x 2 covariance (autodiff of the projection)."""
     o = rig.omni
-    f = lambda v: _image_point(v, o.r_m, o.H_o, o.profile)  # noqa: E731
+    f = lambda v: _image_point(v, o.r_m, o.H_o, o.profile)
     flat, cf = xy.reshape(-1, 2), cov.reshape(-1, 2, 2)
     rt = jax.vmap(f)(flat)
     J = jax.vmap(jax.jacfwd(f))(flat)

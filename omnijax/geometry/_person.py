@@ -16,7 +16,8 @@ def person_image_extent(R, omni, H_p, R_h, body_radius) -> tuple[Array, Array]:
     at floor distance ``R`` (m): the paper's cylinder (footnote 3) with a head.
 
     The body is a cylinder of radius ``body_radius`` from the floor to the shoulders at
-    ``SHOULDER * H_p`` (as the synthetic world draws people), topped by a head sphere of radius ``R_h`` whose top is at ``H_p``.
+    ``SHOULDER * H_p`` (as the synthetic world draws people), topped by a head sphere of radius ``R_h``
+    whose top is at ``H_p``.
     The inner end is the body's foot nearest the omni axis (r_f of eq 1 for the floor
     point ``R - body_radius``); the outer end is the farthest imaged point of the
     shoulders or head (eq 2's r_h, generalised to the head's outline).

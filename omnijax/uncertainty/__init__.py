@@ -2,8 +2,8 @@
 
 from ._uncertainty import (
     METHODS as METHODS,
-    MonteCarloCovariance as MonteCarloCovariance,
     OUTPUT_NAMES as OUTPUT_NAMES,
+    MonteCarloCovariance as MonteCarloCovariance,
     PointingCovariance as PointingCovariance,
     gum_second_order as gum_second_order,
     pointing_covariance as pointing_covariance,

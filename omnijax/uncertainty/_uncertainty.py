@@ -111,14 +111,14 @@ def _analytic_one(x, sigma, profile):
     v = sigma**2
     v_rf, v_thf, v_Ho, v_Hf, v_Dc, v_thc, v_rm, v_Hp, v_Rh = v
 
-    radius = lambda r_f, H_o, r_m: floor_radius(r_f, r_m, H_o, profile)[0]  # noqa: E731 (eq 1)
+    radius = lambda r_f, H_o, r_m: floor_radius(r_f, r_m, H_o, profile)[0]
     R_p = radius(r_f, H_o, r_m)
     g_rf, g_Ho, g_rm = jax.grad(radius, argnums=(0, 1, 2))(r_f, H_o, r_m)
     var_R = g_rf**2 * v_rf + g_Ho**2 * v_Ho + g_rm**2 * v_rm
 
     vt = theta_f - theta_c
     var_vt = v_thf + v_thc
-    distance = lambda R, vt, D_c: foveal_offsets(R, vt, D_c)[2]  # noqa: E731 (eq 3)
+    distance = lambda R, vt, D_c: foveal_offsets(R, vt, D_c)[2]
     D_p = distance(R_p, vt, D_c)
     d_R, d_vt, d_Dc = jax.grad(distance, argnums=(0, 1, 2))(R_p, vt, D_c)
     var_D = d_R**2 * var_R + d_vt**2 * var_vt + d_Dc**2 * v_Dc
@@ -290,7 +290,8 @@ def pointing_covariance_mc(
     mean = np.asarray(y0) + mean_dev
     mean[:, 0] = np.angle(np.exp(1j * mean[:, 0]))  # pan back into (-pi, pi]
     return MonteCarloCovariance(
-        covariance=PointingCovariance(cov=jnp.asarray(cov.reshape(*shape, 4, 4)), valid=jnp.asarray(valid.reshape(shape))),
+        covariance=PointingCovariance(cov=jnp.asarray(cov.reshape(*shape, 4, 4)),
+                                      valid=jnp.asarray(valid.reshape(shape))),
         mean=jnp.asarray(mean.reshape(*shape, 4)),
         trials=n,
         batches=h,

@@ -21,11 +21,11 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, UInt8
 
 from ..config import Rig
+from ..zoom import face_pixels
 from ._noise import derive_key
 from ._people import blocks, body, body_albedo, hit_body, shadow_rays
 from ._scene import albedo, f32, intersect_room, lamp_irradiance, lit, xyz
 from ._sensor import expose
-from ..zoom import face_pixels
 
 #: Rows of the foveal image cast at once (bounds memory).
 FOVEAL_BLOCK_ROWS = 32
@@ -100,7 +100,7 @@ def head_in_view(rig: Rig, pan, tilt, zoom, head: Float[Array, "3"], R_h) -> Hea
     p = camera_coords(view, head)
     W, H = view.size
     half_w, half_h = 0.5 * W / view.focal, 0.5 * H / view.focal
-    margin = lambda t, q: (t * p[2] - jnp.abs(q)) / jnp.sqrt(1.0 + t * t)  # noqa: E731
+    margin = lambda t, q: (t * p[2] - jnp.abs(q)) / jnp.sqrt(1.0 + t * t)
     inside = (margin(half_w, p[0]) >= R_h) & (margin(half_h, p[1]) >= R_h) & (p[2] > R_h)
     distance = jnp.linalg.norm(p)
     pixel = view.centre + view.focal * p[:2] / p[2]
@@ -121,7 +121,8 @@ def _foveal_rows(scene, view: PTZView, state, row0, n_rows: int):
     W, _ = view.size
     y, x = jnp.meshgrid(row0 + jnp.arange(n_rows), jnp.arange(W), indexing="ij")
     v = f32(view)
-    d = v.forward + ((x - v.centre[0]) / v.focal)[..., None] * v.right + ((y - v.centre[1]) / v.focal)[..., None] * v.down
+    u, w = (x - v.centre[0]) / v.focal, (y - v.centre[1]) / v.focal
+    d = v.forward + u[..., None] * v.right + w[..., None] * v.down
     d = f32(d)
     eye = v.position
     people, bg = scene.people, scene.background

@@ -13,8 +13,8 @@ grey level.
 
 from __future__ import annotations
 
-import numpy as np
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 from jaxtyping import Array, UInt8
 
@@ -37,7 +37,7 @@ def quant_tables(quality: int) -> tuple[np.ndarray, np.ndarray]:
     if not 1 <= quality <= 100:
         raise ValueError(f"JPEG quality must be in 1..100, got {quality}")
     scale = 5000 // quality if quality < 50 else 200 - 2 * quality
-    q = lambda t: np.clip(np.floor((t * scale + 50) / 100), 1, 255)  # noqa: E731
+    q = lambda t: np.clip(np.floor((t * scale + 50) / 100), 1, 255)
     return q(_LUMA), q(_CHROMA)
 
 
@@ -74,7 +74,7 @@ def jpeg(image: UInt8[Array, "H W 3"], quality: int) -> UInt8[Array, "H W 3"]:
     y = jnp.round(0.299 * r + 0.587 * g + 0.114 * b)
     cb = jnp.round(-0.168736 * r - 0.331264 * g + 0.5 * b + 128.0)
     cr = jnp.round(0.5 * r - 0.418688 * g - 0.081312 * b + 128.0)
-    half = lambda p: jnp.round(0.25 * (p[0::2, 0::2] + p[1::2, 0::2] + p[0::2, 1::2] + p[1::2, 1::2]))  # noqa: E731
+    half = lambda p: jnp.round(0.25 * (p[0::2, 0::2] + p[1::2, 0::2] + p[0::2, 1::2] + p[1::2, 1::2]))
     y = _blocks_roundtrip(y, luma_t, dct)
     cb = upsample(_blocks_roundtrip(half(cb), chroma_t, dct), 2) - 128.0
     cr = upsample(_blocks_roundtrip(half(cr), chroma_t, dct), 2) - 128.0

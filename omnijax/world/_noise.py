@@ -42,7 +42,7 @@ def as_u32(x: ArrayLike) -> UInt32[Array, "*b"]:
     return lax.bitcast_convert_type(x.astype(jnp.int32), jnp.uint32)
 
 
-def derive_key(key: UInt32[ArrayLike, "2 *k"], *words: ArrayLike) -> UInt32[Array, "2 *b"]:
+def derive_key(key: UInt32[ArrayLike, " 2 *k"], *words: ArrayLike) -> UInt32[Array, " 2 *b"]:
     """A new key from ``key`` and extra integers (frame index, stream id, ...); array words give
     an array of keys (stacked along the trailing axes)."""
     k0, k1 = jnp.asarray(key, jnp.uint32)[0], jnp.asarray(key, jnp.uint32)[1]
@@ -59,7 +59,7 @@ def key_from_seed(seed: int) -> UInt32[Array, "2"]:
     return derive_key(jnp.array([seed & 0xFFFFFFFF, seed >> 32], jnp.uint32), 0)
 
 
-def hash_bits(key: UInt32[ArrayLike, "2 *k"], counter: UInt32[ArrayLike, "*b"]) -> UInt32[Array, "*b"]:
+def hash_bits(key: UInt32[ArrayLike, " 2 *k"], counter: UInt32[ArrayLike, "*b"]) -> UInt32[Array, "*b"]:
     """32 random bits per counter value: ``mix32(mix32(c ^ k0) + k1)``."""
     key = jnp.asarray(key, jnp.uint32)
     return mix32(mix32(as_u32(counter) ^ key[0]) + key[1])
@@ -79,12 +79,14 @@ def gaussian(key: UInt32[ArrayLike, "2"], shape: tuple[int, ...]) -> Float[Array
     return (jnp.float32(math.sqrt(2.0)) * lax.erf_inv(2.0 * u - 1.0)).reshape(shape)
 
 
-def lattice_uniform(key: UInt32[ArrayLike, "2 *k"], i: ArrayLike, j: ArrayLike) -> Float[Array, "*b"]:
+def lattice_uniform(key: UInt32[ArrayLike, " 2 *k"], i: ArrayLike, j: ArrayLike) -> Float[Array, "*b"]:
     """A uniform (0, 1) value attached to the integer lattice point (i, j)."""
     return uniform(hash_bits(key, mix32(as_u32(i)) ^ (as_u32(j) * jnp.uint32(GOLDEN))))
 
 
-def value_noise(key: UInt32[ArrayLike, "2 *k"], u: Float[ArrayLike, "*b"], v: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
+def value_noise(
+    key: UInt32[ArrayLike, " 2 *k"], u: Float[ArrayLike, "*b"], v: Float[ArrayLike, "*b"]
+) -> Float[Array, "*b"]:
     """Smooth noise in (-0.5, 0.5): lattice values interpolated with a smoothstep, period 1 in u and v."""
     u, v = jnp.asarray(u), jnp.asarray(v)
     fu, fv = jnp.floor(u), jnp.floor(v)

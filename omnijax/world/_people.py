@@ -96,7 +96,7 @@ def draw_people(rig: Rig, scenario: Scenario, key: Array) -> People:
     pr, sg = rig.person, rig.sigmas
     H_p = _truncated(k[0], pr.H_p, sg.H_p, (n,))
     R_h = _truncated(k[1], pr.R_h, sg.R_h, (n,))
-    pick = lambda kk, palette: palette[jax.random.randint(kk, (n,), 0, palette.shape[0])]  # noqa: E731
+    pick = lambda kk, palette: palette[jax.random.randint(kk, (n,), 0, palette.shape[0])]
     top, bottom = pick(k[2], crowd.clothing), pick(k[3], crowd.clothing)
     floor_like = jnp.arange(n) < jnp.round(crowd.floor_like * n)
     jitter = 1.0 + 0.05 * jax.random.normal(k[4], (n, 2, 3))
@@ -105,7 +105,7 @@ def draw_people(rig: Rig, scenario: Scenario, key: Array) -> People:
     top = jnp.where(floor_like[:, None], like[:, 0], top)
     bottom = jnp.where(floor_like[:, None], like[:, 1], bottom)
     speed = jax.random.uniform(k[6], (n,), minval=crowd.speed[0], maxval=crowd.speed[1])
-    f32 = lambda x: x.astype(jnp.float32)  # noqa: E731
+    f32 = lambda x: x.astype(jnp.float32)
     return People(
         H_p=H_p, R_h=R_h, radius=0.5 * pr.shoulder_width, top=f32(top), bottom=f32(bottom),
         skin=f32(pick(k[7], crowd.skin)), hair=f32(pick(k[8], crowd.hair)), speed=speed, floor_like=floor_like,
@@ -190,7 +190,7 @@ def _simulate(rig: Rig, scenario: Scenario, people: People, pos: Float[Array, "p
                        jax.random.uniform(kp2, (n,), minval=crowd.pause[0], maxval=crowd.pause[1]), 0.0)
     to_goal = goals - pos
     facing0 = to_goal / jnp.maximum(jnp.linalg.norm(to_goal, axis=-1, keepdims=True), 1e-9)
-    others = lambda i: jnp.arange(n) != i  # noqa: E731
+    others = lambda i: jnp.arange(n) != i
 
     def person(i, state, keys):
         pos, vel, goal, pause, facing, blocked, moving = state
@@ -273,7 +273,7 @@ class Body(eqx.Module):
 
 def body(people: People, i, foot: Float[Array, "2"]) -> Body:
     """The solid of person ``i`` standing at ``foot``."""
-    f = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
+    f = lambda x: jnp.asarray(x, jnp.float32)
     return Body(foot=f(foot), radius=f(people.radius), shoulder=f(people.shoulder[i]),
                 waist=f(WAIST * people.H_p[i]), head_z=f(people.head_z[i]), R_h=f(people.R_h[i]))
 

@@ -191,7 +191,8 @@ def build_background(omni: OmniCamera, room: Room3D, lamps, intensity, spectrum,
     shadow = shadow_rays(jnp.asarray(np.broadcast_to(start[None], to_lamp.shape)), jnp.asarray(to_lamp))
     return OmniBackground(
         colour=colour * spectrum * gain[..., None], irradiance=irr, depth=depth, gain=gain, rays=rays,
-        shadow=shadow, shadow_irradiance=jnp.asarray(coarse, jnp.float32), shadow_index=jnp.asarray(index), eye=jnp.array([0.0, 0.0, 1.0], jnp.float32) * f32(omni.H_o),
+        shadow=shadow, shadow_irradiance=jnp.asarray(coarse, jnp.float32), shadow_index=jnp.asarray(index),
+        eye=jnp.array([0.0, 0.0, 1.0], jnp.float32) * f32(omni.H_o),
         lamps=lamps, intensity=intensity, spectrum=spectrum, window=window, antialias=antialias,
         downsample=downsample,
     )
@@ -207,7 +208,7 @@ def hull(foot: Float[Array, "*b 2"], radius, shoulder, head_z, R_h) -> Float[Arr
     a = jnp.linspace(0.0, 2 * jnp.pi, HULL_POINTS, endpoint=False)
     ring = jnp.stack([jnp.cos(a), jnp.sin(a)], axis=-1)
     foot = jnp.asarray(foot)
-    col = lambda v: jnp.broadcast_to(jnp.asarray(v, foot.dtype), foot.shape[:-1])[..., None, None]  # noqa: E731
+    col = lambda v: jnp.broadcast_to(jnp.asarray(v, foot.dtype), foot.shape[:-1])[..., None, None]
     radius, shoulder, head_z, R_h = col(radius), col(shoulder), col(head_z), col(R_h)
     f = foot[..., None, :]
 
@@ -216,7 +217,8 @@ def hull(foot: Float[Array, "*b 2"], radius, shoulder, head_z, R_h) -> Float[Arr
         return jnp.concatenate([xy, jnp.broadcast_to(z, xy[..., :1].shape)], axis=-1)
 
     crown = jnp.concatenate([f, head_z + R_h], axis=-1)
-    return jnp.concatenate([circle(radius, 0.0 * radius), circle(radius, shoulder), circle(R_h, head_z), crown], axis=-2)
+    rings = [circle(radius, 0.0 * radius), circle(radius, shoulder), circle(R_h, head_z), crown]
+    return jnp.concatenate(rings, axis=-2)
 
 
 def image_box(omni: OmniCamera, points: Float[Array, "*b n 3"]) -> Float[Array, "*b 4"]:

@@ -173,7 +173,8 @@ def intersect_room(room: Room3D, origin: Float[Array, "*o 3"], direction: Float[
                        jnp.where((surface == CEILING)[..., None], -up,
                                  jnp.where((surface == WALL)[..., None], n_w, n_b)))
     normal = jnp.where(dot3(normal, direction)[..., None] > 0, -normal, normal)
-    u = jnp.where(surface == WALL, jnp.take_along_axis(s_wall, jnp.clip(k - 2, 0, n_wall - 1)[..., None], -1)[..., 0], 0.0)
+    wall_s = jnp.take_along_axis(s_wall, jnp.clip(k - 2, 0, n_wall - 1)[..., None], -1)[..., 0]
+    u = jnp.where(surface == WALL, wall_s, 0.0)
     return Hit(t=t, point=point, normal=normal, surface=surface, index=index, u=u)
 
 
@@ -184,7 +185,8 @@ def surface_albedo(surface: Surface, key: UInt32[Array, "2"], u, v) -> Float[Arr
     fu, fv = u - iu * tile, v - iv * tile
     tiled = surface.tile > 0
     grout = tiled & ((fu < surface.grout) | (fv < surface.grout))
-    tile_factor = 1.0 + jnp.where(tiled, surface.tile_variation * (2.0 * lattice_uniform(key, iu.astype(jnp.int32), iv.astype(jnp.int32)) - 1.0), 0.0)
+    tile_u = lattice_uniform(key, iu.astype(jnp.int32), iv.astype(jnp.int32))
+    tile_factor = 1.0 + jnp.where(tiled, surface.tile_variation * (2.0 * tile_u - 1.0), 0.0)
     k2 = derive_key(key, 1)
     g = 1.0 / surface.texture_scale
     fine = value_noise(k2, u * g, v * g) + 0.5 * value_noise(k2, 2.3 * u * g + 17.0, 2.3 * v * g + 5.0)
@@ -201,7 +203,8 @@ def albedo(room: Room3D, hit: Hit) -> Float[Array, "*b 3"]:
     wall = jnp.where((p[..., 2] < room.skirting_height)[..., None], room.skirting_colour, wall)
     nb = room.box_colour.shape[0]
     if nb:
-        grain = value_noise(derive_key(room.key, FURNITURE, hit.index), 12.0 * (p[..., 0] + p[..., 1]), 12.0 * p[..., 2])
+        grain_key = derive_key(room.key, FURNITURE, hit.index)
+        grain = value_noise(grain_key, 12.0 * (p[..., 0] + p[..., 1]), 12.0 * p[..., 2])
         box = room.box_colour[jnp.clip(hit.index, 0, nb - 1)] * (1.0 + FURNITURE_TEXTURE * 2.0 * grain)[..., None]
     else:
         box = jnp.zeros_like(floor)

@@ -40,7 +40,9 @@ def digitise(image: Float[Array, "H W 3"], jpeg_quality: int = 0, keep=True) -> 
     return jpeg(own_buffer(out, keep), jpeg_quality) if jpeg_quality else out
 
 
-def expose(linear: Float[Array, "H W 3"], sigma, key: UInt32[Array, "2"], jpeg_quality: int = 0) -> UInt8[Array, "H W 3"]:
+def expose(
+    linear: Float[Array, "H W 3"], sigma, key: UInt32[Array, "2"], jpeg_quality: int = 0
+) -> UInt8[Array, "H W 3"]:
     """The 8-bit RGB frame of a noise-free image in grey levels: :func:`sensor_noise` added,
     quantised, JPEG-compressed if ``jpeg_quality`` (1..100) is given."""
     return digitise(linear + sensor_noise(sigma, key, linear.shape), jpeg_quality)

@@ -21,12 +21,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int, UInt8, UInt32
 
-from ..detection import chromaticity
 from ..config import Rig
-from ..geometry import point_image_radius
+from ..detection import chromaticity
+from ..geometry import SHOULDER, point_image_radius
 from ._image import own_buffer
 from ._noise import derive_key, key_from_seed
-from ..geometry import SHOULDER
 from ._people import Paths, People, body, body_distance, draw_people, walk, walkable
 from ._render import OmniBackground, build_background, render_linear, window_size
 from ._scenario import Scenario
@@ -54,7 +53,7 @@ def draw_true_rig(rig: Rig, key: Array) -> Rig:
     values = (draw(k[0], rig.omni.H_o, s.H_o), r_m, rig.omni.rim * r_m / rig.omni.r_m,
               draw(k[2], rig.foveal.H_f, s.H_f), jnp.abs(draw(k[3], rig.foveal.D_c, s.D_c)),
               draw(k[4], rig.foveal.theta_c, s.theta_c))
-    where = lambda r: (r.omni.H_o, r.omni.r_m, r.omni.rim, r.foveal.H_f, r.foveal.D_c, r.foveal.theta_c)  # noqa: E731
+    where = lambda r: (r.omni.H_o, r.omni.r_m, r.omni.rim, r.foveal.H_f, r.foveal.D_c, r.foveal.theta_c)
     return eqx.tree_at(where, rig, values)
 
 

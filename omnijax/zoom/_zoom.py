@@ -134,7 +134,7 @@ def _frame_bracket(cov, rho, aspect, p_contain) -> tuple[Array, Array]:
     ``(1 + p_contain) / 2``, it is at least ``p_contain``). ``t_hi / t_lo`` is about 1.1.
     """
     sx, sy = jnp.sqrt(jnp.maximum(cov[0, 0], 0.0)), jnp.sqrt(jnp.maximum(cov[1, 1], 0.0))
-    need = lambda k: jnp.maximum(rho + k * sx, (rho + k * sy) / aspect)  # noqa: E731
+    need = lambda k: jnp.maximum(rho + k * sx, (rho + k * sy) / aspect)
     return need(ndtri(0.5 * (1.0 + p_contain))), need(ndtri(1.0 - 0.25 * (1.0 - p_contain)))
 
 
@@ -214,7 +214,7 @@ def _choose_calibrated(lens, cov4, tilt, slant, R_h, p_contain):
     widest_fails = p_b < p_contain
     solve = ~longest_ok & ~widest_fails
     target = ndtri(0.5 * (1.0 + p_contain)) + _ROOT_MARGIN
-    score = lambda p: ndtri(0.5 * (1.0 + p)) - target  # noqa: E731
+    score = lambda p: ndtri(0.5 * (1.0 + p)) - target
     t = _frame_root(lens.aspect, cov, rho, target, a, b, score(p_a), score(p_b), solve, t_lo)
     zoom = lens.clamp(lens.zoom_for_tan_half_fov_h(t))
     return jnp.where(longest_ok, lens.zoom_range[1], jnp.where(widest_fails, lens.zoom_range[0], zoom))

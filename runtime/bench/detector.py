@@ -12,8 +12,8 @@ import numpy as np
 from tqdm import tqdm
 
 from omnijax import build_detector, detect, learn_background, line_background
-from omnijax.world import build_world
 from omnijax.detection import find_sectors, line_change, locate_feet
+from omnijax.world import build_world
 from runtime.bench.timing import time_calls
 from runtime.files import load_scenario
 

@@ -374,9 +374,9 @@ def simulate_many(rig: Rig, settings: SimulationSettings, n_positions: int, n_ru
     for start in range(0, n_runs, batch):
         n = min(batch, n_runs - start)
         fits, truth, drawn = jax.tree_util.tree_map(
-            lambda a: a[:n], _simulate_batch(keys[start:start + batch], rig, settings, n_positions))
+            lambda a, n=n: a[:n], _simulate_batch(keys[start:start + batch], rig, settings, n_positions))
         for i in range(n):
-            fit_i = jax.tree_util.tree_map(lambda a: a[i], fits)
+            fit_i = jax.tree_util.tree_map(lambda a, i=i: a[i], fits)
             counted.append(bool(drawn[i]) and check_fit(fit_i, max_sigma_m, max_sigma_deg) is None)
         values.append(np.asarray(fits.values))
         truths.append(np.asarray(truth))

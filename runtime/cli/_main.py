@@ -14,8 +14,9 @@ import sys
 from runtime.errors import UsageError
 
 #: Subcommands, in the order ``--help`` lists them; each is ``runtime.cli.<name>``.
-COMMANDS: tuple[str, ...] = ("demo", "run", "variance", "validate", "render", "detect", "bench", "optimise", "calibrate",
-                            "ptz", "ptz-emulator")
+COMMANDS: tuple[str, ...] = (
+    "demo", "run", "variance", "validate", "render", "detect", "bench", "optimise", "calibrate", "ptz", "ptz-emulator",
+)
 
 DESCRIPTION = """\
 Dual-camera surveillance (Greiffenhagen et al., CVPR 2000) in JAX: an

@@ -168,6 +168,7 @@ def _calibrate(args, rig, profile) -> int:
     import numpy as np
 
     from omnijax import PARAM_NAMES, fit_rim
+    from runtime.calibration.plots import residual_figure, rim_figure
     from runtime.calibration.runs import (
         CHI2_P_MIN,
         CalibrationError,
@@ -184,7 +185,6 @@ def _calibrate(args, rig, profile) -> int:
         rim_prior,
         with_sigmas,
     )
-    from runtime.calibration.plots import residual_figure, rim_figure
     from runtime.errors import UsageError
     from runtime.files import load_rig
     from runtime.output import dumps, staged_output
@@ -226,7 +226,7 @@ def _calibrate(args, rig, profile) -> int:
         "profile": str(prof_path) if prof_path else None,
     }
     estimated = {n: s[n] for n in ("H_o", "H_f", "D_c", "theta_c", "r_m")}
-    stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    stamp = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     source = f"{args.frame} and {args.observations}" if args.frame else args.observations
     header = (f"Calibrated by `omnijax calibrate` on {stamp} from {source};\n"
               f"started from {args.config}. Sigmas are the fit's (see calibration.json).")
@@ -300,8 +300,8 @@ def _simulate(args, rig, profile) -> int:
     from tqdm import tqdm
 
     from omnijax import PARAM_NAMES, SimulationSettings
-    from runtime.calibration.runs import face_widths, simulate_many, with_sigmas
     from runtime.calibration.plots import sigma_figure
+    from runtime.calibration.runs import face_widths, simulate_many, with_sigmas
     from runtime.output import dumps, staged_output
 
     _, prof_path, direction, zero = profile
@@ -360,6 +360,7 @@ def _simulate(args, rig, profile) -> int:
         sm = b["sigma_median"]
         print(f"K = {b['positions']:3d} ({b['counted']}/{b['runs']} counted): sigma H_o {100 * sm['H_o']:.2f} cm, "
               f"D_c {100 * sm['D_c']:.2f} cm, H_f {100 * sm['H_f']:.2f} cm, theta_c {math.degrees(sm['theta_c']):.3f} "
-              f"deg, pan zero {math.degrees(sm['pan_zero']):.3f} deg, tilt zero {math.degrees(sm['tilt_zero']):.3f} deg")
+              f"deg, pan zero {math.degrees(sm['pan_zero']):.3f} deg, "
+              f"tilt zero {math.degrees(sm['tilt_zero']):.3f} deg")
     print(f"wrote {out}/calibration.json and sigmas.png in {report['seconds']:.1f} s")
     return 0

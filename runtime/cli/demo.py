@@ -109,8 +109,8 @@ class FovealInset:
 
 
 def run(args: argparse.Namespace) -> int:
-    from runtime.errors import UsageError
     from runtime.cli.run import check_loop_options, loop_config, parse_faults
+    from runtime.errors import UsageError
 
     check_loop_options(args)
     if args.background_step < 1:
@@ -126,11 +126,11 @@ def run(args: argparse.Namespace) -> int:
 
     from omnijax.world import build_world
     from runtime.files import load_scenario
-    from runtime.ptz.child import EmulatorProcess
     from runtime.ptz import PtzDriver, PtzError, default_profile
-    from runtime.validation.scoring import DemoScorer
+    from runtime.ptz.child import EmulatorProcess
     from runtime.realtime.session import run_session
     from runtime.realtime.sources import FaultySource, SyntheticSource
+    from runtime.validation.scoring import DemoScorer
 
     rig, sc = load_scenario(scenario)
     print(f"omnijax demo: building the world '{sc.name}' ({args.frames} frames at {sc.fps:g} fps) ...",

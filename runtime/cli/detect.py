@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-
 import time
 
 HELP = "detect people (feet, sectors, sigmas) in a video file or a folder of images"

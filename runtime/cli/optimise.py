@@ -106,7 +106,7 @@ def _findings(result, rig) -> dict | None:
     index = tuple(slice(None) if n in ("D_c", "H_f") else int(np.argmin(np.abs(ls.axes[n] - v)))
                   for n, v in zip(names, best))
     transpose = names.index("D_c") > names.index("H_f")
-    take = lambda k: ls.summaries[k][index].T if transpose else ls.summaries[k][index]  # noqa: E731
+    take = lambda k: ls.summaries[k][index].T if transpose else ls.summaries[k][index]
     D, H = ls.axes["D_c"], ls.axes["H_f"]
 
     def falls(key):  # how the mean changes along D_c, over all H_f rows

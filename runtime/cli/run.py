@@ -74,8 +74,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def check_loop_options(args) -> None:
     """Check the shared options, and turn on the compilation cache (later starts compile less)."""
-    from runtime.errors import UsageError
     from runtime.cli.optimise import _enable_cache
+    from runtime.errors import UsageError
 
     if args.dwell < 0:
         raise UsageError(f"--dwell: expected seconds >= 0, got {args.dwell}")
@@ -161,6 +161,7 @@ def run(args: argparse.Namespace) -> int:
             driver.disconnect()
     lat, p = summary["latency_ms"], summary["ptz"]
     print(f"{summary['frames']} frames at {summary['fps']:.1f} fps ({summary['stop_reason']}); latency p50 "
-          f"{lat['p50'] or float('nan'):.2f} ms, p99 {lat['p99'] or float('nan'):.2f} ms; PTZ {p['commands']} commands, "
+          f"{lat['p50'] or float('nan'):.2f} ms, p99 {lat['p99'] or float('nan'):.2f} ms; "
+          f"PTZ {p['commands']} commands, "
           f"{p['errors']} errors, {p['reconnects']} reconnects; wrote {args.out}", file=sys.stdout)
     return 0

@@ -75,10 +75,9 @@ def _counts(args) -> tuple[int, int, int]:
 
 
 def _scenario(args, rig):
+    from omnijax.world import parse_scenario
     from runtime.files import read_toml
     from runtime.validation.endtoend import table1_scenario
-
-    from omnijax.world import parse_scenario
 
     if args.scenario is None:
         return table1_scenario(rig, args.seed), "a plain room on the rig's floor outline"
@@ -153,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
           f"autodiff vs MC {p['autodiff_vs_mc_max_rel']:.4f}, analytic vs MC {p['analytic_vs_mc_max_rel']:.3f}, "
           f"autodiff vs analytic {p['autodiff_vs_analytic_max_rel']:.3f}; MC {p['montecarlo']['trials']} trials, "
           f"tolerance {p['montecarlo']['tolerance']:.4f}")
-    ratios = lambda rows, q: " ".join("n/a" if r[f"ratio_{q}"] is None else f"{r[f'ratio_{q}']:.3g}"  # noqa: E731
+    ratios = lambda rows, q: " ".join("n/a" if r[f"ratio_{q}"] is None else f"{r[f'ratio_{q}']:.3g}"
                                       for r in rows)
     for name in ("table1", "table1_full_propagation"):
         rows = report[name]

@@ -9,13 +9,12 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
 from omnijax import Rig
-from optimise import FloorGrid, FloorValues, SearchResult, place  # noqa: E402
-
-from runtime.validation.plots import draw_rig  # noqa: E402
+from optimise import FloorGrid, FloorValues, SearchResult, place
+from runtime.validation.plots import draw_rig
 
 #: Per-point quantity shown by each map, its label and how it is scaled.
 MAP_QUANTITIES = {
@@ -157,7 +156,8 @@ def landscape_figure(result: SearchResult, rig: Rig, path: Path) -> None:
                 ax.plot(*(_shown(n, float(getattr(lay, n))) for n in shown), m, color=c, mec="k", ms=11, label=lab)
             if "H_f" in shown and k == "var_tan_tilt_mean":
                 h = float(rig.person.H_p - rig.person.R_h)
-                ax.axhline(h, color="w", ls="--", lw=1) if shown[1] == "H_f" else ax.axvline(h, color="w", ls="--", lw=1)
+                line = ax.axhline if shown[1] == "H_f" else ax.axvline
+                line(h, color="w", ls="--", lw=1)
             for values, limit in ((xs, ax.set_xlim), (ys, ax.set_ylim)):  # room for markers on the bounds
                 pad = 0.03 * (values[-1] - values[0])
                 limit(values[0] - pad, values[-1] + pad)
@@ -166,7 +166,7 @@ def landscape_figure(result: SearchResult, rig: Rig, path: Path) -> None:
         else:
             xs = _shown(shown[0], result.landscape.axes[shown[0]])
             ax.plot(xs, zz, "k-")
-            for lay, m, c, lab in marks:
+            for lay, _, c, lab in marks:
                 x = float(getattr(lay, shown[0]))
                 ax.axvline(_shown(shown[0], x), color=c if c != "w" else "0.5", ls="--", label=lab)
             ax.set_xlabel(_LABELS[shown[0]])

@@ -301,7 +301,8 @@ class RealTimeLoop:
         if frame.image.shape != self.shape:
             self.counts["wrong_size"] += 1
             h, w = frame.image.shape[:2]
-            log.write(json.dumps({**record, "fault": f"frame {w}x{h}, expected {self.shape[1]}x{self.shape[0]}"}) + "\n")
+            fault = f"frame {w}x{h}, expected {self.shape[1]}x{self.shape[0]}"
+            log.write(json.dumps({**record, "fault": fault}) + "\n")
             return
         self.counts["frames"] += 1
         t = time.monotonic()

@@ -23,8 +23,8 @@ import numpy as np
 
 from omnijax import Rig, build_detector, learn_background
 from omnijax.detection import polar_range
-from runtime.realtime.loop import LoopConfig, RealTimeLoop
 from runtime.output import dumps, staged_output
+from runtime.realtime.loop import LoopConfig, RealTimeLoop
 from runtime.realtime.overlay import (
     GREEN,
     GREY,

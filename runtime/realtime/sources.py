@@ -52,7 +52,8 @@ class Source(abc.ABC):
         """RGB uint8 frames in order; ``None`` for a frame that could not be read."""
 
     def close(self) -> None:
-        """Release the device or file."""
+        """Release the device or file (nothing to release unless a source says otherwise)."""
+        return None
 
 
 class VideoSource(Source):

@@ -41,17 +41,23 @@ from omnijax import (
     detect,
     learn_background,
     line_background,
-    pointing,
     point_image_radius,
+    pointing,
     pointing_covariance,
 )
-from omnijax.detection import Background
-from omnijax.detection import Detections, Detector, LineBackground, line_change
-from omnijax.world import head_in_view
-from omnijax.world import draw_people, walkable
-from omnijax.world import Scenario, parse_scenario
-from omnijax.world import expose
-from omnijax.world import World, build_world, draw_true_rig, render_frame
+from omnijax.detection import Background, Detections, Detector, LineBackground, line_change
+from omnijax.world import (
+    Scenario,
+    World,
+    build_world,
+    draw_people,
+    draw_true_rig,
+    expose,
+    head_in_view,
+    parse_scenario,
+    render_frame,
+    walkable,
+)
 
 #: Containment is measured at these p_contain, for both zoom rules.
 P_CONTAIN = (0.9, 0.95, 0.99)
@@ -322,7 +328,7 @@ def trials(bench: Bench, foot, n: int, key, fresh: str, chunk: int = 25,
         if progress:
             progress(m)
     det, others, over = concat(parts)
-    rep = lambda a: np.broadcast_to(np.asarray(a), (n, *np.shape(a)))  # noqa: E731
+    rep = lambda a: np.broadcast_to(np.asarray(a), (n, *np.shape(a)))
     return Trials(det=det, x_true=rep(_truth_inputs(tr, world.true_rig)), head=rep(tr.head[0]), R_h=rep(tr.R_h[0]),
                   true_rig=jax.tree.map(rep, world.true_rig), others=others, lines_over=over)
 
@@ -401,8 +407,10 @@ def table_row(rig: Rig, name: str, foot, t: Trials, detection_only: bool) -> dic
     if detection_only:  # the trial-to-trial spread of the detection
         alt_r, alt_th = np.full_like(r_f, np.std(r_f, ddof=1)), np.full_like(th, np.std(np.asarray(e_th), ddof=1))
     else:  # its error about the truth, bias included
-        alt_r, alt_th = np.full_like(r_f, np.sqrt(np.mean(e_r**2))), np.full_like(th, np.sqrt(np.mean(np.asarray(e_th) ** 2)))
-    _, _, alt_sp, alt_tt = (np.asarray(a) for a in _pointing_stats(rig, *map(jnp.asarray, (r_f, th, alt_r, alt_th)), mask))
+        alt_r = np.full_like(r_f, np.sqrt(np.mean(e_r**2)))
+        alt_th = np.full_like(th, np.sqrt(np.mean(np.asarray(e_th) ** 2)))
+    alt = _pointing_stats(rig, *map(jnp.asarray, (r_f, th, alt_r, alt_th)), mask)
+    _, _, alt_sp, alt_tt = (np.asarray(a) for a in alt)
     fo = rig.foveal
     row = {"position": name, "foot_m": [float(v) for v in foot], "trials": int(f.sum()), "missed": int((~f).sum()),
            "distance_to_ptz_m": float(np.hypot(foot[0] - fo.D_c * np.cos(fo.theta_c),
@@ -473,7 +481,8 @@ def rates(rig: Rig, detector: Detector, empty: Trials, people: list[Trials]) -> 
     others = np.concatenate([np.asarray(t.others) for t in people])
     miss = binomial(int((~found).sum()), found.size)
     return {
-        "x_f": float(rig.detection.x_f), "false_alarm_rate": fa["rate"], "false_alarm_interval": [fa["lower"], fa["upper"]],
+        "x_f": float(rig.detection.x_f), "false_alarm_rate": fa["rate"],
+        "false_alarm_interval": [fa["lower"], fa["upper"]],
         "x_m": float(rig.detection.x_m), "miss_rate": miss["rate"], "miss_interval": [miss["lower"], miss["upper"]],
         "false_alarm_meaning": "share of radial lines of empty frames whose sum M exceeds the lower threshold (eq 10)",
         "miss_meaning": "share of person trials (Table 1, both variants) with no valid sector covering the person",

@@ -7,13 +7,13 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.colors import SymLogNorm  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.colors import SymLogNorm
 
 from omnijax import Rig, world_to_image
 
-from .theory import PtzMaps  # noqa: E402
+from .theory import PtzMaps
 
 QUANTITY_LABEL = {
     "sin_pan": r"var(sin pan)",

@@ -34,7 +34,8 @@ def _table1(rows: list[dict], full: bool) -> list[str]:
         d = r["diagnosis"]
         alt = [r[f"pred_var_{q}_measured_detection_sigma"] / r[f"emp_var_{q}"] if r[f"emp_var_{q}"] > 0 else None
                for q in ("tan_tilt", "sin_pan")]
-        lines.append(f"| {r['position']} | {_g(d['sigma_r_f_px'])} | {_g(d['r_f_sd_px'])} | {_g(d['r_f_error_rms_px'])} "
+        lines.append(f"| {r['position']} | {_g(d['sigma_r_f_px'])} | {_g(d['r_f_sd_px'])} "
+                     f"| {_g(d['r_f_error_rms_px'])} "
                      f"| {_g(d['sigma_theta_f_rad'])} | {_g(d['theta_f_sd_rad'])} | {_g(d['theta_f_error_rms_rad'])} "
                      f"| {_g(d['contrast_median'])} | {_g(alt[0])} | {_g(alt[1])} |")
     return lines

@@ -116,7 +116,8 @@ class DemoScorer:
             w = k - k0
             p = (1 - w) * self.positions[k0, person] + w * self.positions[k1, person]
             head, R_h = np.r_[p, self.head_z[person]], float(self.R_h[person])
-        prob = np.asarray(command.aimed.probability, float) if command.aimed is not None else np.full(len(RULES), np.nan)
+        aimed = command.aimed
+        prob = np.asarray(aimed.probability, float) if aimed is not None else np.full(len(RULES), np.nan)
         self.batch.append((command.pan, command.tilt, [command.zooms[r] for r in RULES], head, R_h, prob))
         if len(self.batch) == BATCH:
             self._score_batch()

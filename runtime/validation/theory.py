@@ -76,7 +76,7 @@ def chroma_check(sensor_sigma: float, *, blue: float = 50.0, step: int = 8, samp
         "grid": {"levels": len(levels), "step": step},
         "sensor_sigma": sensor_sigma,
     }
-    fig9 = lambda c: c[..., 0, 0] + c[..., 1, 1] + c[..., 0, 1]  # noqa: E731  (figure 9's quantity)
+    fig9 = lambda c: c[..., 0, 0] + c[..., 1, 1] + c[..., 0, 1]
     maps = {"levels": levels, "eq5": fig9(eq5), "mc_minus_eq5": fig9(mc) - fig9(eq5), "rel": rel_mc}
     return summary, maps
 

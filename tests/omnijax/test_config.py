@@ -10,11 +10,11 @@ import tomllib
 
 import numpy as np
 import pytest
-from tests.paths import CONFIGS
 
 from omnijax import ConfigError, parse_rig
 from runtime.cli import main
 from runtime.files import load_rig
+from tests.paths import CONFIGS
 
 
 def paper_dict() -> dict:

@@ -8,8 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
+from hypothesis import given, strategies as st
 
 from omnijax import D_P_MIN, floor_radius, image_to_floor, pointing, pointing_outputs, world_to_image
 

@@ -10,9 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
-from tests.tolerances import CLOSED_FORM, EXACT, FINITE_DIFF
+from hypothesis import given, settings, strategies as st
 
 from omnijax import (
     Paraboloid,
@@ -22,6 +20,7 @@ from omnijax import (
     pointing_covariance_mc,
     pointing_outputs,
 )
+from tests.tolerances import CLOSED_FORM, EXACT, FINITE_DIFF
 
 PROFILE = Paraboloid()
 _outputs = jax.jit(lambda x: pointing_outputs(x, PROFILE))
@@ -112,7 +111,7 @@ def test_autodiff_jacobian_is_the_hand_derived_one(x):
 @settings(max_examples=1000)
 @given(x=inputs)
 def test_autodiff_jacobian_against_central_differences(x):
-    f = lambda v: np.asarray(_outputs(jnp.asarray(v)))  # noqa: E731
+    f = lambda v: np.asarray(_outputs(jnp.asarray(v)))
     J = np.asarray(_jacfwd(jnp.asarray(x)))
     fd = np.empty_like(J)
     for i in range(9):
@@ -194,7 +193,7 @@ def test_eq_14_overstates_sin_pan_where_R_p_and_D_p_correlate(paper_rig):
 
 def test_gum_second_order_is_exact_for_quadratics():
     mu, sd = jnp.array([1.3, -0.7]), jnp.array([0.4, 0.9])
-    f = lambda x: jnp.stack([x[0] * x[1], x[0] ** 2])  # noqa: E731
+    f = lambda x: jnp.stack([x[0] * x[1], x[0] ** 2])
     c = np.asarray(gum_second_order(f, mu, sd))
     m1, m2 = 1.3, -0.7
     v1, v2 = 0.16, 0.81

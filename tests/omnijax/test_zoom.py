@@ -8,8 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 from scipy.stats import multivariate_normal, norm
 
 from omnijax import (
@@ -70,7 +69,7 @@ def test_paper_factor_is_5_15_for_99_percent():
 def test_calibrated_zoom_is_the_largest_that_meets_p_contain(paper_rig, r_f, theta):
     a = aim(paper_rig, r_f, theta)
     lens, z = paper_rig.foveal.lens, float(a.zoom.zoom)
-    p = lambda zz: float(containment_probability(  # noqa: E731
+    p = lambda zz: float(containment_probability(
         lens, zz, a.covariance.pan_tilt, a.pointing.tilt, a.pointing.slant, paper_rig.person.R_h))
     assert float(a.zoom.probability) == pytest.approx(p(z))
     if bool(a.zoom.feasible):

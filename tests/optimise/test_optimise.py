@@ -12,9 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from tests.paths import CONFIGS
-from hypothesis import given
-from hypothesis import strategies as st
+from hypothesis import given, strategies as st
 
 from omnijax import ConfigError, parse_rig
 from optimise import (
@@ -29,6 +27,7 @@ from optimise import (
 )
 from runtime.cli import main
 from runtime.files import load_rig
+from tests.paths import CONFIGS
 
 PAPER = str(CONFIGS / "paper.toml")
 

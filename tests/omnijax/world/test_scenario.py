@@ -6,12 +6,12 @@ import copy
 import tomllib
 
 import pytest
-from tests.paths import CONFIGS
 
 from omnijax import ConfigError
 from omnijax.world import parse_scenario
 from runtime.cli import main
 from runtime.files import load_scenario
+from tests.paths import CONFIGS
 
 SCENARIOS = sorted((CONFIGS / "scenarios").glob("*.toml"))
 

@@ -11,9 +11,18 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from omnijax.world import effective_sigma, gaussian, jpeg, key_from_seed, quantise
-from omnijax.world import own_buffer, upsample
-from omnijax.world import derive_key, uniform, value_noise
+from omnijax.world import (
+    derive_key,
+    effective_sigma,
+    gaussian,
+    jpeg,
+    key_from_seed,
+    own_buffer,
+    quantise,
+    uniform,
+    upsample,
+    value_noise,
+)
 
 
 def test_uniform_never_reaches_0_or_1():

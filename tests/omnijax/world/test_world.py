@@ -10,11 +10,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from tests.paths import CONFIGS
 from scipy import ndimage
 
 from omnijax import chromaticity, chromaticity_covariance, world_to_image
 from omnijax.world import (
+    body,
+    body_distance,
     build_world,
     draw_people,
     draw_true_rig,
@@ -24,10 +25,10 @@ from omnijax.world import (
     render_frames,
     walk,
     walkable,
+    xyz,
 )
-from omnijax.world import body, body_distance
-from omnijax.world import xyz
 from runtime.files import load_scenario
+from tests.paths import CONFIGS
 
 SCEN = CONFIGS / "scenarios"
 

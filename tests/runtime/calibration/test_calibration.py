@@ -12,13 +12,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from tests.runtime.calibration.helpers import disc_frame, observations_json
-from tests.paths import CONFIGS, shared_data
 
 from omnijax import GLOBAL_NAMES, PARAM_NAMES, SimulationSettings, fit_rig, fit_rim, simulate_calibration
 from runtime.calibration.runs import check_fit, simulate_many
 from runtime.cli import main
 from runtime.files import load_rig
+from tests.paths import CONFIGS, shared_data
+from tests.runtime.calibration.helpers import disc_frame, observations_json
 
 PAPER = CONFIGS / "paper.toml"
 EXAMPLE = CONFIGS / "observations_example.json"

@@ -7,9 +7,9 @@ import json
 import cv2
 import numpy as np
 import pytest
-from tests.paths import CONFIGS
 
 from runtime.cli import build_parser, main
+from tests.paths import CONFIGS
 
 SIX = str(CONFIGS / "scenarios" / "six_people.toml")
 
@@ -29,7 +29,8 @@ def test_render_writes_video_truth_and_world(tmp_path, capsys, six_world):
     world = json.loads((out / "world.json").read_text())
     assert world["frames"] == 4 and world["seed"] == 6 and world["camera_model"] == "paraboloid"
     assert set(world["true_rig"]) >= {"H_o_m", "r_m_px", "H_f_m", "D_c_m", "theta_c_rad"}
-    assert len(world["people"]) == 6 and sorted(p.name for p in (out / "frames").iterdir()) == ["000000.png", "000003.png"]
+    assert len(world["people"]) == 6
+    assert sorted(p.name for p in (out / "frames").iterdir()) == ["000000.png", "000003.png"]
     video = cv2.VideoCapture(str(out / "omni.avi"))
     frames = []
     while True:

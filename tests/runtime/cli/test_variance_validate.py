@@ -8,9 +8,9 @@ import subprocess
 import sys
 
 import pytest
-from tests.paths import CONFIGS, ROOT
 
 from runtime.cli import build_parser, main
+from tests.paths import CONFIGS, ROOT
 
 PAPER = str(CONFIGS / "paper.toml")
 INPUTS = ("r_f", "theta_f", "H_o", "H_f", "D_c", "theta_c", "r_m", "H_p", "R_h")

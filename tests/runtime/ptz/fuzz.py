@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import random
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from runtime.ptz import pelco_d, visca
 from runtime.ptz.pelco_d import PelcoDParser
@@ -27,7 +27,7 @@ _AMBIGUOUS_PELCO = {pelco_d.REPLY_PAN, pelco_d.REPLY_TILT, pelco_d.REPLY_ZOOM}
 def visca_packets(rng: random.Random) -> list[bytes]:
     """A random mix of valid VISCA commands and replies (what either end may receive)."""
     a = rng.randint(1, 7)
-    s16 = lambda: rng.randint(-0x8000, 0x7FFF)  # noqa: E731
+    s16 = lambda: rng.randint(-0x8000, 0x7FFF)
     choices: list[Callable[[], bytes]] = [
         lambda: visca.address_set(rng.randint(1, 7)),
         lambda: visca.if_clear(rng.choice([a, visca.BROADCAST])),

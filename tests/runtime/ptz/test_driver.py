@@ -17,12 +17,12 @@ import time
 from pathlib import Path
 
 import pytest
-from tests.runtime.ptz.helpers import profile_mapping, quick_profile, wait_for
 
 from runtime.cli import main
 from runtime.ptz import Faults, PtyEmulator, PtzDriver, PtzError, parse_profile
-
 from tests.paths import ROOT
+from tests.runtime.ptz.helpers import profile_mapping, quick_profile, wait_for
+
 OMNIJAX = str(Path(sys.executable).parent / "omnijax")
 TARGETS = [(30.0, -20.0, 4.0), (-120.0, 4.0, 1.0), (165.0, -29.0, 12.5), (0.0, 0.0, 18.0)]
 
@@ -302,7 +302,7 @@ def test_a_camera_that_falls_silent_is_re_initialised_and_counted_once():
         emu.faults = Faults(drop=1.0)
         for i in range(3):
             ptz.set_target(0.2 + 0.1 * i, 0.0, 1.0)
-            assert wait_for(lambda: ptz.stats()["timeouts"] >= 2 * (i + 1))
+            assert wait_for(lambda i=i: ptz.stats()["timeouts"] >= 2 * (i + 1))
         assert wait_for(lambda: not ptz.connected)
         assert wait_for(lambda: ptz.stats()["timeouts"] >= 12)  # AddressSet retried with back-off
         errors = ptz.counters["errors"]

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import pytest
 import serial
-from tests.runtime.ptz.helpers import wait_for
 
 from runtime.ptz import PelcoDCamera, ViscaCamera, default_profile, pelco_d, visca
 from runtime.ptz.pelco_d import PelcoDParser
 from runtime.ptz.visca import ErrorCode, ViscaParser
-
 from tests.paths import ROOT
+from tests.runtime.ptz.helpers import wait_for
+
 #: The installed entry point, as a user runs it.
 OMNIJAX = str(Path(sys.executable).parent / "omnijax")
 VISCA = default_profile("visca")
@@ -157,9 +157,8 @@ def test_pelco_ignores_and_counts_bad_packets():
 
 
 def test_pelco_without_general_responses():
-    from tests.runtime.ptz.helpers import profile_mapping
-
     from runtime.ptz import parse_profile
+    from tests.runtime.ptz.helpers import profile_mapping
 
     m = profile_mapping("pelco-d")
     m["pelco_d"] = {"general_response": False}

@@ -10,6 +10,7 @@ checksum-valid packet, which is counted, and must stay rare).
 from __future__ import annotations
 
 import pytest
+
 from tests.runtime.ptz.fuzz import KINDS, run
 
 N = 1500

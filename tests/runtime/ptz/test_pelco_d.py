@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
+from hypothesis import given, strategies as st
 
 from runtime.ptz import pelco_d
 from runtime.ptz.pelco_d import GeneralResponse, Message, PelcoDParser

@@ -6,12 +6,11 @@ import copy
 import math
 
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
-from tests.runtime.ptz.helpers import profile_mapping
+from hypothesis import given, strategies as st
 
 from runtime.ptz import ProfileError, default_profile, load_profile, parse_profile
 from runtime.ptz.profile import DEVICES_DIR
+from tests.runtime.ptz.helpers import profile_mapping
 
 
 @pytest.mark.parametrize("protocol", ["visca", "pelco-d"])

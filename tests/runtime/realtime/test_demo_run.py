@@ -14,7 +14,6 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -24,8 +23,8 @@ from runtime.cli import main
 from runtime.realtime.faults import FaultPlan
 from runtime.realtime.loop import Samples
 from runtime.realtime.sources import Capture, FaultySource, Source
-
 from tests.paths import ROOT
+
 PAPER = str(ROOT / "configs" / "paper.toml")
 FAULTS = "broken@100,wrong-size@105,ptz-unplug@110:0.5,end@190"
 
