@@ -128,6 +128,7 @@ from .uncertainty import (
     pointing_outputs as pointing_outputs,
 )
 from .zoom import (
+    ZOOM_RULES as ZOOM_RULES,
     ZoomChoice as ZoomChoice,
     choose_zoom as choose_zoom,
     containment_probability as containment_probability,

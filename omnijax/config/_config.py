@@ -25,6 +25,7 @@ from jaxtyping import Array, Float
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from ..camera import PROFILES, OCamCalib, OmniCamera, parse_ocamcalib
+from ..zoom._rules import ZoomRule
 
 # --------------------------------------------------------------------------------------
 # Kernel-side types
@@ -193,7 +194,7 @@ class Rig(eqx.Module):
     room: Room
     p_contain: Float[Array, ""]
     layout: LayoutSearch
-    zoom_rule: Literal["paper", "calibrated"] = eqx.field(static=True)
+    zoom_rule: ZoomRule = eqx.field(static=True)
 
     def input_mean(self, r_f, theta_f) -> Float[Array, "*b 9"]:
         """The input vector x of the pointing geometry, in :data:`INPUT_NAMES` order.
@@ -338,7 +339,7 @@ class DetectionSection(_Section):
 
 class ZoomSection(_Section):
     p_contain: Prob = Field(description="probability that the whole head is in the foveal frame")
-    rule: Literal["paper", "calibrated"] = "calibrated"
+    rule: ZoomRule = "calibrated"
 
 
 class RoomSection(_Section):
