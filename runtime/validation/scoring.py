@@ -31,7 +31,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from omnijax.world import head_in_view
-from runtime.realtime.loop import RULES
+from omnijax.zoom import ZOOM_RULES as RULES
 
 #: Trials scored at once (one compiled shape); face widths are histogrammed in 1 px bins up to FACE_MAX.
 BATCH, FACE_MAX = 256, 4096
@@ -117,7 +117,8 @@ class DemoScorer:
             p = (1 - w) * self.positions[k0, person] + w * self.positions[k1, person]
             head, R_h = np.r_[p, self.head_z[person]], float(self.R_h[person])
         aimed = command.aimed
-        prob = np.asarray(aimed.probability, float) if aimed is not None else np.full(len(RULES), np.nan)
+        prob = (np.array([float(aimed.zooms[r].probability) for r in RULES]) if aimed is not None
+                else np.full(len(RULES), np.nan))
         self.batch.append((command.pan, command.tilt, [command.zooms[r] for r in RULES], head, R_h, prob))
         if len(self.batch) == BATCH:
             self._score_batch()
