@@ -27,9 +27,11 @@ implicit-function-theorem JVP), which the layout optimiser relies on.
 
 from __future__ import annotations
 
+import functools
 from typing import Literal
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -81,7 +83,7 @@ def detection_sigmas(rig: Rig, sigma_r_f=None, sigma_theta_f=None) -> tuple[Arra
     return jnp.asarray(s_r, float), jnp.asarray(s_t, float)
 
 
-@eqx.filter_jit
+@jax.jit
 def floor_from_detections(rig: Rig, r_f, theta_f, sigma_r_f, sigma_theta_f
                           ) -> tuple[Float[Array, "*b 2"], Float[Array, "*b 2 2"]]:
     """Floor positions (m) of detections and their covariance under :func:`detection_sigmas` (eq 1).
@@ -109,7 +111,7 @@ def input_covariance(rig: Rig, cov_image: Float[Array, "2 2"]) -> Float[Array, "
     return jnp.diag(sig**2).at[:2, :2].set(cov_image)
 
 
-@eqx.filter_jit
+@functools.partial(jax.jit, static_argnames="rules")
 def aim_from_image(rig: Rig, r_f, theta_f, cov_image: Float[Array, "2 2"],
                    rules: tuple[str, ...] | None = None, zero_sigma=None) -> Aim:
     """The core: pan/tilt/zoom at the head of the person whose foot is seen at (``r_f`` px,
@@ -128,7 +130,7 @@ def aim_from_image(rig: Rig, r_f, theta_f, cov_image: Float[Array, "2 2"],
     return aim_with_covariance(rig, x, cov, rules)
 
 
-@eqx.filter_jit
+@functools.partial(jax.jit, static_argnames="rules")
 def aim_detection(rig: Rig, r_f, theta_f, sigma_r_f=None, sigma_theta_f=None,
                   rules: tuple[str, ...] | None = None, zero_sigma=None) -> Aim:
     """Pan/tilt/zoom for a detection at (``r_f`` px, ``theta_f`` rad) with the detector's sigmas,
@@ -137,7 +139,7 @@ def aim_detection(rig: Rig, r_f, theta_f, sigma_r_f=None, sigma_theta_f=None,
     return aim_from_image(rig, r_f, theta_f, jnp.diag(jnp.stack([s_r**2, s_t**2])), rules, zero_sigma)
 
 
-@eqx.filter_jit
+@functools.partial(jax.jit, static_argnames="rules")
 def aim_at_floor(rig: Rig, xy: Float[Array, "2"], cov_xy: Float[Array, "2 2"] | None = None,
                  rules: tuple[str, ...] | None = None, zero_sigma=None) -> Aim:
     """Pan/tilt/zoom at the head above floor point ``xy`` (m) whose covariance is ``cov_xy`` (2 x 2, m^2).
@@ -153,7 +155,7 @@ def aim_at_floor(rig: Rig, xy: Float[Array, "2"], cov_xy: Float[Array, "2 2"] | 
     return aim_from_image(rig, rt[0], rt[1], cov_rt, rules, zero_sigma)
 
 
-@eqx.filter_jit
+@functools.partial(jax.jit, static_argnames="method")
 def aim(
     rig: Rig,
     r_f,
