@@ -16,17 +16,16 @@ every failure is a one-line :class:`ProfileError` naming the file and key.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-import pydantic
 from annotated_types import Len
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
-from omnijax.config._config import _one_line
+from omnijax.config import Pos, Section, validate
+from runtime.files import read_toml
 
 #: Where the shipped profiles live (``configs/devices`` of the checkout).
 DEVICES_DIR = Path(__file__).resolve().parents[2] / "configs" / "devices"
@@ -42,16 +41,11 @@ class ProfileError(ValueError):
     """A device profile that cannot be used (one line: file, key, what was expected)."""
 
 
-Pos = Annotated[float, Field(gt=0)]
 Range = Annotated[list[float], Len(2, 2)]
 Direction = Literal[-1, 1]
 
 
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
-
-
-class AxisSection(_Section):
+class AxisSection(Section):
     """One rotation axis in the device's own degrees."""
 
     limits_deg: Range = Field(description="lowest and highest reachable angle, device degrees")
@@ -78,7 +72,7 @@ class AxisSection(_Section):
         return self.max_speed_deg_s * speed / self.max_speed
 
 
-class ZoomSection(_Section):
+class ZoomSection(Section):
     """The lens: device zoom position at each magnification (interpolated linearly between rows)."""
 
     magnification: Annotated[list[Annotated[float, Field(ge=1)]], Len(2)]
@@ -96,7 +90,7 @@ class ZoomSection(_Section):
         return self
 
 
-class MountingSection(_Section):
+class MountingSection(Section):
     """How the geometry's pan/tilt map to the device's: ``device = direction * geometry + zero``."""
 
     pan_zero_deg: float = Field(0.0, description="device pan when the PTZ looks toward the omni camera's axis")
@@ -105,7 +99,7 @@ class MountingSection(_Section):
     tilt_direction: Direction = Field(1, description="+1: device tilt grows upward; -1: downward")
 
 
-class LinkSection(_Section):
+class LinkSection(Section):
     """Timing of the serial link (seconds)."""
 
     ack_timeout_s: Pos = 0.5
@@ -122,7 +116,7 @@ class LinkSection(_Section):
         return self
 
 
-class PelcoDSection(_Section):
+class PelcoDSection(Section):
     """Pelco-D options."""
 
     general_response: bool = Field(True, description="the device answers each command with a general response")
@@ -159,7 +153,7 @@ class PtzPosition:
         return math.degrees(self.tilt)
 
 
-class DeviceProfile(_Section):
+class DeviceProfile(Section):
     """A validated device profile; see ``configs/devices/sony_evi_d70.toml`` for every key."""
 
     name: str
@@ -272,10 +266,7 @@ class DeviceProfile(_Section):
 
 def parse_profile(mapping: dict, source: str = "<profile>") -> DeviceProfile:
     """Validate a profile mapping (as read from TOML); one-line :class:`ProfileError` if it is wrong."""
-    try:
-        return DeviceProfile.model_validate(mapping)
-    except pydantic.ValidationError as exc:
-        raise ProfileError(_one_line(exc, source)) from None
+    return validate(DeviceProfile, mapping, source, ProfileError)
 
 
 def resolve_profile_path(name_or_path: str | Path) -> Path:
@@ -289,16 +280,7 @@ def resolve_profile_path(name_or_path: str | Path) -> Path:
 def load_profile(name_or_path: str | Path) -> DeviceProfile:
     """Read and validate a profile (see :func:`resolve_profile_path`)."""
     path = resolve_profile_path(name_or_path)
-    try:
-        with path.open("rb") as fh:
-            mapping = tomllib.load(fh)
-    except FileNotFoundError:
-        raise ProfileError(f"{path}: no such device profile") from None
-    except IsADirectoryError:
-        raise ProfileError(f"{path}: is a directory, expected a device profile (TOML)") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ProfileError(f"{path}: not valid TOML: {exc}") from None
-    return parse_profile(mapping, source=str(path))
+    return parse_profile(read_toml(path, "device profile", ProfileError), source=str(path))
 
 
 def default_profile(protocol: str) -> DeviceProfile:
