@@ -46,7 +46,7 @@ from omnijax import (
     pointing_covariance_full,
     sector_mask,
 )
-from omnijax.geometry import floor_measurement, image_position
+from omnijax.geometry import floor_measurement, image_position, wrap_pi
 from runtime.realtime.sources import Capture, Frame
 from runtime.realtime.targeting import TargetSelector, outside_dead_zone
 from runtime.realtime.tracker import Tracker
@@ -355,7 +355,7 @@ class RealTimeLoop:
         speed unless ``zoom`` is false)."""
         if self.profile is None or self.sent is None:
             return 0.0
-        d_pan = abs(math.degrees(math.remainder(target[0] - self.sent[0], 2 * math.pi)))
+        d_pan = abs(math.degrees(wrap_pi(target[0] - self.sent[0])))
         d_tilt = abs(math.degrees(target[1] - self.sent[1]))
         zp = self.profile.zoom
         z_span = max(zp.position) - min(zp.position)

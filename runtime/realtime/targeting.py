@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 
+from omnijax.geometry import wrap_pi
 from runtime.realtime.tracker import Track
 
 
@@ -55,6 +56,6 @@ def outside_dead_zone(new: tuple[float, float, float], sent: tuple[float, float,
     """Whether ``new`` (pan, tilt rad, zoom) differs from the ``sent`` command enough to send it."""
     if sent is None:
         return True
-    d_pan = abs(math.remainder(new[0] - sent[0], 2 * math.pi))
+    d_pan = abs(wrap_pi(new[0] - sent[0]))
     return (d_pan > k * sd_pan or abs(new[1] - sent[1]) > k * sd_tilt
             or abs(math.log(new[2] / sent[2])) > zoom_rel)
