@@ -122,10 +122,10 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--background-step: expected a positive count, got {args.background_step}")
 
     from runtime.files import load_rig
-    from runtime.frames import SourceError
+    from runtime.frames import FolderSource, SourceError, open_source
     from runtime.ptz import ProfileError, PtzDriver, PtzError, load_profile
     from runtime.realtime.session import run_session
-    from runtime.realtime.sources import FaultySource, FolderSource, open_source
+    from runtime.realtime.sources import FaultySource
 
     rig = load_rig(args.config)
     try:

@@ -23,6 +23,7 @@ import numpy as np
 
 from omnijax import Rig, build_detector, learn_background
 from omnijax.detection import polar_range
+from runtime.frames import Source
 from runtime.output import dumps, staged_output
 from runtime.realtime.loop import LoopConfig, RealTimeLoop
 from runtime.realtime.overlay import (
@@ -37,7 +38,7 @@ from runtime.realtime.overlay import (
     draw_tracks,
     track_pixels,
 )
-from runtime.realtime.sources import Capture, Source
+from runtime.realtime.sources import Capture
 
 
 class VideoOut:
