@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -37,6 +37,10 @@ INPUT_UNITS: dict[str, str] = {
     "r_f": "px", "theta_f": "rad", "H_o": "m", "H_f": "m", "D_c": "m",
     "theta_c": "rad", "r_m": "px", "H_p": "m", "R_h": "m",
 }
+#: The zoom rules of :func:`omnijax.zoom.choose_zoom` (re-exported there): eq 15 as printed, and calibrated.
+#: The schema's names, hence defined here; import them from ``omnijax.zoom``.
+ZoomRule = Literal["paper", "calibrated"]
+ZOOM_RULES: tuple[str, ...] = get_args(ZoomRule)
 
 
 class Lens(eqx.Module):
@@ -189,7 +193,7 @@ class Rig(eqx.Module):
     room: Room
     p_contain: Float[Array, ""]
     layout: LayoutSearch
-    zoom_rule: Literal["paper", "calibrated"] = eqx.field(static=True)
+    zoom_rule: ZoomRule = eqx.field(static=True)
 
     def input_mean(self, r_f, theta_f) -> Float[Array, "*b 9"]:
         """The input vector x of the pointing geometry, in :data:`INPUT_NAMES` order.
@@ -328,7 +332,7 @@ class DetectionSection(Section):
 
 class ZoomSection(Section):
     p_contain: Prob = Field(description="probability that the whole head is in the foveal frame")
-    rule: Literal["paper", "calibrated"] = "calibrated"
+    rule: ZoomRule = "calibrated"
 
 
 class RoomSection(Section):

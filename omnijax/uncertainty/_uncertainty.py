@@ -138,6 +138,9 @@ def _analytic_one(x, sigma, profile):
 
 
 _KERNELS = {"autodiff": _autodiff_one, "analytic": _analytic_one, "second_order": _second_order_one}
+#: The methods of :func:`pointing_covariance` (:data:`METHODS` less Monte Carlo, which is
+#: :func:`pointing_covariance_mc`).
+PROPAGATION_METHODS: tuple[str, ...] = tuple(_KERNELS)
 
 
 @jax.jit

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 import numpy as np
 from annotated_types import Len
@@ -29,6 +29,9 @@ from runtime.files import read_toml
 
 #: Where the shipped profiles live (``configs/devices`` of the checkout).
 DEVICES_DIR = Path(__file__).resolve().parents[2] / "configs" / "devices"
+#: The serial protocols a profile can name (``--protocol``).
+Protocol = Literal["visca", "pelco-d"]
+PROTOCOLS: tuple[str, ...] = get_args(Protocol)
 #: The profile each protocol uses when none is given.
 DEFAULT_PROFILES = {"visca": "sony_evi_d70", "pelco-d": "pelco_d_dome"}
 #: Largest magnitude of a VISCA pan/tilt position (signed 16-bit nibbles) and of any zoom position.
@@ -157,7 +160,7 @@ class DeviceProfile(Section):
     """A validated device profile; see ``configs/devices/sony_evi_d70.toml`` for every key."""
 
     name: str
-    protocol: Literal["visca", "pelco-d"]
+    protocol: Protocol
     address: Annotated[int, Field(ge=1, le=255)]
     baudrate: Annotated[int, Field(gt=0)] = 9600
     pan: AxisSection

@@ -47,6 +47,7 @@ from omnijax import (
     sector_mask,
 )
 from omnijax.geometry import floor_measurement, image_position, wrap_pi
+from omnijax.zoom import ZOOM_RULES as RULES
 from runtime.realtime.sources import Capture, Frame
 from runtime.realtime.targeting import TargetSelector, outside_dead_zone
 from runtime.realtime.tracker import Tracker
@@ -69,9 +70,6 @@ class Aimed(eqx.Module):
     r_f: jax.Array
     theta_f: jax.Array
     cov_rt: jax.Array
-
-
-RULES = ("paper", "calibrated")
 
 
 @jax.jit

@@ -15,13 +15,16 @@ import math
 from omnijax.geometry import wrap_pi
 from runtime.realtime.tracker import Track
 
+#: How the target is chosen (``LoopConfig.target``, ``--target``).
+TARGET_MODES: tuple[str, ...] = ("round-robin", "single")
+
 
 class TargetSelector:
     """Chooses the target track (see the module docstring)."""
 
     def __init__(self, mode: str = "round-robin", dwell_s: float = 2.0):
-        if mode not in ("round-robin", "single"):
-            raise ValueError(f"target mode must be 'round-robin' or 'single', got {mode!r}")
+        if mode not in TARGET_MODES:
+            raise ValueError(f"target mode must be one of {TARGET_MODES}, got {mode!r}")
         self.mode, self.dwell_s = mode, dwell_s
         self.current: int | None = None
         self.settled_at: float | None = None

@@ -59,10 +59,10 @@ from omnijax.world import (
     render_frame,
     walkable,
 )
+from omnijax.zoom import ZOOM_RULES as RULES
 
 #: Containment is measured at these p_contain, for both zoom rules.
 P_CONTAIN = (0.9, 0.95, 0.99)
-RULES = ("paper", "calibrated")
 #: Clearance (m) of the positions from walls and excluded zones, and their distance from the PTZ and the omni axis.
 CLEARANCE, NEAR_PTZ, NEAR_AXIS = 0.5, 1.0, 0.6
 
