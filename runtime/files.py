@@ -12,6 +12,22 @@ if TYPE_CHECKING:
     from omnijax.world import Scenario
 
 
+#: Where the shipped scenarios live (``configs/scenarios`` of the checkout).
+SCENARIOS_DIR = Path(__file__).resolve().parents[1] / "configs" / "scenarios"
+
+
+def scenario_path(spec: str | Path) -> Path:
+    """A scenario file: a path as given, or the bare name of a shipped scenario (``three_people``)."""
+    path = Path(spec)
+    if path.is_file():
+        return path
+    named = SCENARIOS_DIR / f"{spec}.toml"
+    if path.suffix != ".toml" and path.parent == Path(".") and named.is_file():
+        return named
+    names = ", ".join(sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml")))
+    raise ConfigError(f"{spec}: no such scenario file, nor a scenario name ({names})")
+
+
 def read_toml(path: str | Path, kind: str = "config file", error: type[Exception] = ConfigError) -> dict:
     """Parse a TOML file; a missing or malformed file is one line (``error``) naming the file as a ``kind``."""
     path = Path(path)

@@ -48,6 +48,7 @@ from omnijax import (
 )
 from omnijax.geometry import floor_measurement, image_position, wrap_pi
 from omnijax.zoom import ZOOM_RULES as RULES
+from runtime.realtime.config import LoopConfig
 from runtime.realtime.sources import Capture, Frame
 from runtime.realtime.targeting import TargetSelector, outside_dead_zone
 from runtime.realtime.tracker import Tracker
@@ -131,23 +132,6 @@ class Command:
     t_predicted: float
     aimed: Aimed | None = None
     floor_sd: np.ndarray | None = None  # sd of the predicted floor position (X, Y), m
-
-
-@dataclass
-class LoopConfig:
-    """Settings of :class:`RealTimeLoop` (command-line flags)."""
-
-    zoom_rule: str = "calibrated"
-    tracker: str = "kalman"
-    target: str = "round-robin"
-    dwell_s: float = 2.0
-    dead_zone_sd: float = 1.0
-    adapt_every: int = 2
-    home: tuple[float, float, float] = (0.0, 0.0, 1.0)
-    status_every_s: float = 0.5
-    max_frames: int | None = None
-    max_seconds: float | None = None
-    quiet: bool = False
 
 
 class Samples:

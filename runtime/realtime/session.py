@@ -25,7 +25,8 @@ from omnijax import Rig, build_detector, learn_background
 from omnijax.detection import polar_range
 from runtime.frames import Source
 from runtime.output import dumps, staged_output
-from runtime.realtime.loop import LoopConfig, RealTimeLoop
+from runtime.realtime.config import LoopConfig
+from runtime.realtime.loop import RealTimeLoop
 from runtime.realtime.overlay import (
     GREEN,
     GREY,
