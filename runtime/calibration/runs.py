@@ -107,7 +107,7 @@ def _one_line(exc: pydantic.ValidationError, source: str) -> str:
 
 
 def parse_observations(data, rig: Rig, direction: tuple[int, int], source: str = "observations") -> Observations:
-    """Validate an OBS.json mapping (see README "Calibration") and build :class:`Observations`.
+    """Validate an OBS.json mapping (see docs/calibration.md) and build :class:`Observations`.
 
     Positions without sigmas take the rig's ``[detection]`` ones; readings become radians.
     """

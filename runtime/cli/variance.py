@@ -42,7 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def variance_report(rig, r_f: float, theta_f: float, method: str, sigma_r_f=None, sigma_theta_f=None,
                     rel_tol: float = 0.005, seed: int = 0) -> dict:
-    """The ``omnijax variance`` JSON object (DESIGN.md section 7) for one foot position."""
+    """The ``omnijax variance`` JSON object (docs/design.md section 7.3) for one foot position."""
     import jax
 
     from omnijax import INPUT_NAMES, aim, aim_with_covariance, pointing_covariance_mc
