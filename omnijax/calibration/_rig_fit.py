@@ -215,7 +215,7 @@ def with_mounting_sigma(cov: Float[Array, "*b 4 4"], pan, tilt, sigma_pan_zero, 
 
 
 # --------------------------------------------------------------------------------------
-# Simulated calibrations (DESIGN.md section 5: a true rig drawn per run)
+# Simulated calibrations (docs/design.md section 5: a true rig drawn per run)
 # --------------------------------------------------------------------------------------
 
 

@@ -30,7 +30,7 @@ from ._schema import ConfigError, NonNeg, Pos, Section, validate
 # Kernel-side types
 # --------------------------------------------------------------------------------------
 
-#: Order of the uncertain inputs of the pointing geometry (DESIGN.md section 4, eq 13-14).
+#: Order of the uncertain inputs of the pointing geometry (docs/design.md section 3.2, eq 13-14).
 INPUT_NAMES: tuple[str, ...] = ("r_f", "theta_f", "H_o", "H_f", "D_c", "theta_c", "r_m", "H_p", "R_h")
 #: Units of the inputs, as echoed in reports.
 INPUT_UNITS: dict[str, str] = {

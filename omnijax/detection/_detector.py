@@ -139,7 +139,7 @@ def _foot_sigmas(detector: Detector, i, contrast, width) -> tuple[Array, Array]:
     centre is unbiased and its error is where the two edges fall inside their lines'
     bins of width ``step``: uniform, ``step^2 / 12`` each, a quarter of their sum for the
     mean. (The paper's alternative, the sector width as a 99 % interval, overstates it
-    about tenfold in the synthetic world: README, Detection.) A sector wider than one
+    about tenfold in the synthetic world: docs/detection.md.) A sector wider than one
     person there (a vertical cylinder spans ``2 asin(rho / R)``) holds more than the
     person (two people side by side, a person and a ghost): its centre is then uniform
     over the excess width, and the centre line may miss the person's axis, so the

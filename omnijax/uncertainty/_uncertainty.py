@@ -106,7 +106,7 @@ def _second_order_one(x, sigma, profile):
 
 
 def _analytic_one(x, sigma, profile):
-    """Eq 13 and eq 14 as printed (DESIGN.md section 4)."""
+    """Eq 13 and eq 14 as printed (docs/design.md section 4.10)."""
     r_f, theta_f, H_o, H_f, D_c, theta_c, r_m, H_p, R_h = x
     v = sigma**2
     v_rf, v_thf, v_Ho, v_Hf, v_Dc, v_thc, v_rm, v_Hp, v_Rh = v

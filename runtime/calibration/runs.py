@@ -94,7 +94,7 @@ class ObservationsFile(Section):
 
 
 def parse_observations(data, rig: Rig, direction: tuple[int, int], source: str = "observations") -> Observations:
-    """Validate an OBS.json mapping (see README "Calibration") and build :class:`Observations`.
+    """Validate an OBS.json mapping (see docs/calibration.md) and build :class:`Observations`.
 
     Positions without sigmas take the rig's ``[detection]`` ones; readings become radians.
     """

@@ -8,7 +8,7 @@ import math
 HELP = "calibrate a rig from a frame and PTZ observations (or simulate calibrations)"
 DESCRIPTION = """\
 From one omni frame: the mirror rim / fisheye image circle (centre and r_m, with
-their covariance). From observations (OBS.json, see the README): H_o, D_c,
+their covariance). From observations (OBS.json, see docs/calibration.md): H_o, D_c,
 theta_c, H_f and the PTZ's pan/tilt zero offsets by least squares, with their
 covariance; the observations' own noise (detector, marks' heights, rim) is
 carried as nuisance parameters.
@@ -53,7 +53,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frame", metavar="IMAGE",
                    help="one omni frame (any image OpenCV reads) to fit the rim on; without it the rig "
                         "file's centre and r_m (with its sigma_r_m) are used")
-    p.add_argument("--observations", metavar="OBS", help="observations JSON (see the README)")
+    p.add_argument("--observations", metavar="OBS", help="observations JSON (see docs/calibration.md)")
     add_ptz_profile_option(p, "PTZ device profile (name or file): its mounting directions are used, its zero "
                               "offsets are the start, and DIR/<profile>.toml gets the fitted ones", alias=False)
     p.add_argument("--simulate", type=int, metavar="N", help="run N simulated calibrations per K instead")

@@ -21,7 +21,7 @@ misses and false alarms, the foot position error on the floor, and for each
 frame with a target whether the true head would be inside the PTZ frame for
 both zoom rules (the paper's and the calibrated one), and its width in pixels.
 
-Writes DIR/summary.json (DESIGN.md section 7), DIR/log.jsonl (one line per
+Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line per
 frame), DIR/annotated.mp4 (the operator's view: the omni frame with sectors,
 centre lines, feet, heads, tracks with 95 % ellipses, and the foveal view
 rendered from the synthetic world at the emulated PTZ's actual position) and

@@ -126,7 +126,7 @@ def _findings(result, rig) -> dict | None:
 
 
 def layout_report(result, rig, seconds: float, timing: dict, config: str) -> dict:
-    """The ``layout.json`` object (DESIGN.md section 7's keys and more)."""
+    """The ``layout.json`` object (docs/design.md section 7.3's keys and more)."""
     from optimise import SENSE, SHARPNESS
 
     spec = rig.layout

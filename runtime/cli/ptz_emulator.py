@@ -1,4 +1,4 @@
-"""``omnijax ptz-emulator``: a VISCA or Pelco-D camera on a pseudo-terminal (DESIGN.md section 7)."""
+"""``omnijax ptz-emulator``: a VISCA or Pelco-D camera on a pseudo-terminal (docs/design.md section 7.4)."""
 
 from __future__ import annotations
 

@@ -21,7 +21,7 @@ and the command written to the PTZ unless it is inside the dead zone.
 `omnijax ptz-emulator`); without it commands are computed and logged only.
 Ctrl-C or SIGTERM: the PTZ goes home, the summary is written, nothing is lost.
 
-Writes DIR/summary.json (DESIGN.md section 7), DIR/log.jsonl (one line per frame)
+Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line per frame)
 and DIR/annotated.mp4 (the operator's view; --no-video to skip it).
 """
 

@@ -19,9 +19,9 @@ var {sin_pan, tan_tilt, pan, tilt, cov_pan_tilt}, fov {h, v} (rad), zoom,
 camera_model, valid, and inputs {name: {mean, sigma}} (px, rad, m): the exact
 numbers the result was computed from.
 
---sigma-theta-deg replaces --sigma-theta, which gave the sigma in radians (as
-DESIGN.md section 7 names it): --sigma-theta RAD still works, in radians, for
-one release, and says so on stderr.
+--sigma-theta-deg replaces --sigma-theta, which gave the sigma in radians (the
+name the original command contract uses): --sigma-theta RAD still works, in
+radians, for one release, and says so on stderr.
 """
 
 
@@ -51,7 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def variance_report(rig, r_f: float, theta_f: float, method: str, sigma_r_f=None, sigma_theta_f=None,
                     rel_tol: float = 0.005, seed: int = 0) -> dict:
-    """The ``omnijax variance`` JSON object (DESIGN.md section 7) for one foot position."""
+    """The ``omnijax variance`` JSON object (docs/design.md section 7.3) for one foot position."""
     import jax
 
     from omnijax import INPUT_NAMES, aim, aim_with_covariance, pointing_covariance_mc

@@ -4,7 +4,7 @@ A profile holds the protocol and line settings, the pan/tilt ranges in the
 device's own degrees and its units per degree, the speeds, the zoom lens's
 position for each magnification, the link's timing, and the *mounting*: how
 omnijax's pan/tilt (geometry frame: pan measured at the PTZ from the direction
-of the omni camera's axis, tilt up positive, radians; DESIGN.md eq 4) map to
+of the omni camera's axis, tilt up positive, radians; docs/design.md section 4.2) map to
 the device's angles. :meth:`DeviceProfile.to_device` and
 :meth:`DeviceProfile.from_device` are the only places where angles and zoom
 factors become device units and back; every target is clamped to the limits.

@@ -441,7 +441,7 @@ class RealTimeLoop:
         sys.stderr.flush()
 
     def summary(self) -> dict:
-        """The ``summary.json`` object (DESIGN.md section 7), without the demo's scores."""
+        """The ``summary.json`` object (docs/design.md section 7.3), without the demo's scores."""
         frames = self.counts["frames"]
         ptz = {"commands": self.counts["commands_sent"], "errors": 0, "reconnects": 0}
         if self.driver is not None:

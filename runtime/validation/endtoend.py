@@ -1,6 +1,6 @@
 """End-to-end characterisation on rendered frames: the paper's Table 1, detection rates, containment.
 
-DESIGN.md section 5. A person stands still at eight floor positions P1-P8 (different
+docs/design.md section 5. A person stands still at eight floor positions P1-P8 (different
 distances and directions from the PTZ) in the synthetic world; every trial renders
 an omni frame with fresh sensor noise and runs the detector on it.
 

@@ -54,7 +54,7 @@ def test_old_spellings_still_work_with_one_line_on_stderr(argv, old, new, value,
 
 
 def test_sigma_theta_keeps_its_radians(capsys):
-    """DESIGN.md section 7 names ``--sigma-theta`` (radians) for ``variance``: it still works, in radians."""
+    """The original contract names ``--sigma-theta`` (radians) for ``variance``: it still works, in radians."""
     code = main(["variance", "--config", PAPER, "--json", "--foot", "100", "0.7", "--sigma-theta", "0.01"])
     out, err = capsys.readouterr()
     assert code == 0 and json.loads(out)["inputs"]["theta_f"]["sigma"] == 0.01

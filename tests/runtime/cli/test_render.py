@@ -1,4 +1,4 @@
-"""``omnijax render``: DESIGN.md section 7's contract (video + truth.jsonl), staged output, bad input."""
+"""``omnijax render``: docs/design.md section 7.3's contract (video + truth.jsonl), staged output, bad input."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The command line: `omnijax variance` and `omnijax validate` keep DESIGN.md section 7's contracts."""
+"""The command line: `omnijax variance` and `omnijax validate` keep docs/design.md section 7.3's contracts."""
 
 from __future__ import annotations
 
