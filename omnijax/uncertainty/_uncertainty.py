@@ -30,7 +30,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, PRNGKeyArray
 
 from ..camera import RadialProfile
-from ..geometry import floor_radius, foveal_offsets, pointing
+from ..geometry import floor_radius, foveal_offsets, pointing, wrap_pi
 
 OUTPUT_NAMES: tuple[str, ...] = ("pan", "tilt", "sin_pan", "tan_tilt")
 Method = Literal["autodiff", "analytic", "second_order", "montecarlo"]
@@ -138,6 +138,9 @@ def _analytic_one(x, sigma, profile):
 
 
 _KERNELS = {"autodiff": _autodiff_one, "analytic": _analytic_one, "second_order": _second_order_one}
+#: The methods of :func:`pointing_covariance` (:data:`METHODS` less Monte Carlo, which is
+#: :func:`pointing_covariance_mc`).
+PROPAGATION_METHODS: tuple[str, ...] = tuple(_KERNELS)
 
 
 @jax.jit
@@ -288,7 +291,7 @@ def pointing_covariance_mc(
     mean_dev = sums1 / n
     cov = (sums2 - n * np.einsum("pa,pb->pab", mean_dev, mean_dev)) / (n - 1)
     mean = np.asarray(y0) + mean_dev
-    mean[:, 0] = np.angle(np.exp(1j * mean[:, 0]))  # pan back into (-pi, pi]
+    mean[:, 0] = np.asarray(wrap_pi(mean[:, 0]))  # pan back into [-pi, pi)
     return MonteCarloCovariance(
         covariance=PointingCovariance(cov=jnp.asarray(cov.reshape(*shape, 4, 4)),
                                       valid=jnp.asarray(valid.reshape(shape))),

@@ -227,7 +227,7 @@ def test_shipped_rigs_load(name):
 
 def test_optimise_writes_the_contract_and_maps(tmp_path, capsys):
     out = tmp_path / "opt"
-    code = main(["optimise", "--config", PAPER, "--out", str(out), "--grid-step", "0.6", "--landscape", "5",
+    code = main(["optimise", "--config", PAPER, "--out", str(out), "--grid-step-m", "0.6", "--landscape", "5",
                  "--starts", "2", "--no-cache"])
     assert code == 0, capsys.readouterr().err
     rep = json.loads((out / "layout.json").read_text())
@@ -246,7 +246,7 @@ def test_optimise_writes_the_contract_and_maps(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("args,expect", [
-    (["--grid-step", "-1"], "layout.grid_step"),
+    (["--grid-step-m", "-1"], "layout.grid_step"),
     (["--vary", "H_o"], "H_o bounds"),
     (["--starts", "0"], "layout.starts"),
 ])
