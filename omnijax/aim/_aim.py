@@ -1,6 +1,6 @@
 """The one aim pipeline: a detection with its sigmas (or a tracked floor position with its covariance)
--> pointing, its covariance, and the zoom of each rule (DESIGN.md section 4: "Honest sigmas",
-"Uncertainty propagation", "Zoom").
+-> pointing, its covariance, and the zoom of each rule (docs/design.md section 4.12; the sigma rule
+is section 4.8, the propagation 4.10, the zoom 4.11).
 
 The stages, written once and used by the loop, validation, calibration and the optimiser:
 
@@ -10,8 +10,8 @@ The stages, written once and used by the loop, validation, calibration and the o
 2. :func:`floor_from_detections`: detections -> floor positions (m) with their 2 x 2 covariance
    under the sigma rule (the tracker's measurements; eq 1, autodiff).
 3. :func:`aim_from_image`, the core: the foot at (r_f, theta_f) with a full 2 x 2 covariance joins
-   the rig's calibration sigmas and the person priors in the nine inputs' covariance (DESIGN.md
-   section 4), ``J Sigma J^T`` (autodiff) gives the pointing covariance, and
+   the rig's calibration sigmas and the person priors in the nine inputs' covariance
+   (docs/design.md section 3.2), ``J Sigma J^T`` (autodiff) gives the pointing covariance, and
 4. :func:`aim_with_covariance`: pan/tilt and the zoom of each rule asked for (``paper``,
    ``calibrated``; :data:`omnijax.zoom.ZOOM_RULES`) from a pointing covariance.
 

@@ -1,6 +1,6 @@
 """Zoom from the propagated pointing uncertainty: eq 15 as printed and the calibrated rule."""
 
-from ._rules import (
+from ..config._config import (
     ZOOM_RULES as ZOOM_RULES,
     ZoomRule as ZoomRule,
 )

@@ -23,7 +23,6 @@ half-size is ``tan(fov / 2)``.
 from __future__ import annotations
 
 import functools
-from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax
@@ -32,10 +31,8 @@ import numpy as np
 from jax.scipy.special import erf, ndtri
 from jaxtyping import Array, Bool, Float
 
-from ._rules import ZOOM_RULES
-
-if TYPE_CHECKING:  # annotations only: the config imports the rule names from this package
-    from ..config import Lens
+from ..config import Lens
+from ..config._config import ZOOM_RULES
 
 _GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(64)
 #: The calibrated rule's root finder stops once the containment probability's normal
@@ -230,12 +227,12 @@ def choose_zoom(lens: Lens, rule: str, cov4: Float[Array, "4 4"], distance, tilt
     ``distance`` is D_p and ``slant`` D'_p (m); the result is clamped to the zoom
     range, and ``feasible`` says whether ``p_contain`` is met there (Gaussian model).
     """
-    if rule not in ZOOM_RULES:
-        raise ValueError(f"zoom rule must be one of {ZOOM_RULES}, got {rule!r}")
     if rule == "paper":
         zoom = _choose_paper(lens, cov4, distance, tilt, R_h, p_contain)
-    else:
+    elif rule == "calibrated":
         zoom = _choose_calibrated(lens, cov4, tilt, slant, R_h, p_contain)
+    else:
+        raise ValueError(f"zoom rule must be one of {ZOOM_RULES}, got {rule!r}")
     fov_h, fov_v = lens.fov(zoom)
     prob = containment_probability(lens, zoom, cov4[:2, :2], tilt, slant, R_h)
     return ZoomChoice(zoom=zoom, fov_h=fov_h, fov_v=fov_v, probability=prob, feasible=prob >= p_contain)

@@ -45,7 +45,9 @@ from omnijax import (
     line_background,
     sector_mask,
 )
+from omnijax.geometry import wrap_pi
 from omnijax.zoom import ZOOM_RULES
+from runtime.realtime.config import LoopConfig
 from runtime.realtime.sources import Capture, Frame
 from runtime.realtime.targeting import TargetSelector, outside_dead_zone
 from runtime.realtime.tracker import Tracker
@@ -84,23 +86,6 @@ class Command:
     t_predicted: float
     aimed: Aim | None = None
     floor_sd: np.ndarray | None = None  # sd of the predicted floor position (X, Y), m
-
-
-@dataclass
-class LoopConfig:
-    """Settings of :class:`RealTimeLoop` (command-line flags)."""
-
-    zoom_rule: str = "calibrated"
-    tracker: str = "kalman"
-    target: str = "round-robin"
-    dwell_s: float = 2.0
-    dead_zone_sd: float = 1.0
-    adapt_every: int = 2
-    home: tuple[float, float, float] = (0.0, 0.0, 1.0)
-    status_every_s: float = 0.5
-    max_frames: int | None = None
-    max_seconds: float | None = None
-    quiet: bool = False
 
 
 class Samples:
@@ -306,7 +291,7 @@ class RealTimeLoop:
         speed unless ``zoom`` is false)."""
         if self.profile is None or self.sent is None:
             return 0.0
-        d_pan = abs(math.degrees(math.remainder(target[0] - self.sent[0], 2 * math.pi)))
+        d_pan = abs(math.degrees(wrap_pi(target[0] - self.sent[0])))
         d_tilt = abs(math.degrees(target[1] - self.sent[1]))
         zp = self.profile.zoom
         z_span = max(zp.position) - min(zp.position)
@@ -410,7 +395,7 @@ class RealTimeLoop:
         sys.stderr.flush()
 
     def summary(self) -> dict:
-        """The ``summary.json`` object (DESIGN.md section 7), without the demo's scores."""
+        """The ``summary.json`` object (docs/design.md section 7.3), without the demo's scores."""
         frames = self.counts["frames"]
         ptz = {"commands": self.counts["commands_sent"], "errors": 0, "reconnects": 0}
         if self.driver is not None:
