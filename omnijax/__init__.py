@@ -8,7 +8,7 @@ Pure functions of arrays and config PyTrees, one concept per subpackage:
 - ``omnijax.detection``: chromaticity, change measure, background, polar indexing, the foot (eq 5-12);
 - ``omnijax.uncertainty``: the pointing covariance by four methods (eq 13-14, GUM);
 - ``omnijax.zoom``: eq 15 and the calibrated zoom rule;
-- ``omnijax.aim``: the one aim pipeline, from detections to pan/tilt/zoom;
+- ``omnijax.aiming``: the one aim pipeline, from detections to pan/tilt/zoom;
 - ``omnijax.calibration``: the rim fit and the rig fit;
 - ``omnijax.world``: the synthetic world (ground truth), imported by nothing else in ``omnijax``.
 
@@ -21,7 +21,7 @@ start (``jax.config.update("jax_enable_x64", True)``); a program of your own sho
 (docs/design.md section 3.3).
 """
 
-from .aim import (
+from .aiming import (
     Aim as Aim,
     aim as aim,
     aim_at_floor as aim_at_floor,

@@ -108,7 +108,7 @@ class Sigmas(eqx.Module):
 
 class Detection(eqx.Module):
     """Detection settings: sensor noise, rates, contrast, polar sampling and the sigmas that floor (and
-    default) each detection's (the aim pipeline's sigma rule, :func:`omnijax.aim.detection_sigmas`).
+    default) each detection's (the aim pipeline's sigma rule, :func:`omnijax.aiming.detection_sigmas`).
 
     ``c_min`` is the smallest per-pixel non-centrality (the Mahalanobis contrast of
     a person's chromaticity against the background) for which ``x_m`` must hold.

@@ -58,7 +58,7 @@ STAGES = ("capture", "detect", "track", "aim", "send", "log", "draw", "adapt")
 @jax.jit
 def perceive(detector: Detector, rig: Rig, frame, bg, lines):
     """Detection (steps 1-6) and the detections' floor positions with covariances (the aim
-    pipeline's :func:`~omnijax.aim.floor_from_detections`, under its sigma rule)."""
+    pipeline's :func:`~omnijax.aiming.floor_from_detections`, under its sigma rule)."""
     dets, trace = detect(detector, frame, bg, lines)
     z, R = floor_from_detections(rig, dets.r_f, dets.theta_f, dets.sigma_r_f, dets.sigma_theta_f)
     return dets, trace, z, R
