@@ -33,6 +33,7 @@ test-slow: $(STAMP)
 
 bench: $(STAMP)
 	taskset -c 0 $(BIN)/python benchmarks/bench_uncertainty.py
+	taskset -c 0 $(BIN)/python benchmarks/bench_zoom.py
 	$(BIN)/python benchmarks/bench_ptz.py
 	taskset -c 0 $(BIN)/python benchmarks/bench_render.py
 
