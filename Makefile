@@ -24,12 +24,15 @@ demo: $(STAMP)
 	$(BIN)/omnijax demo --out $(OUT)/demo
 	@echo "open $(OUT)/demo/annotated.mp4 (the operator's view) and $(OUT)/demo/summary.json (the scores)"
 
+# Two workers, one test file each at a time (module fixtures such as the demo run stay in one process).
+XDIST := -n 2 --dist loadfile
+
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -m "not slow"
+	$(BIN)/python -m pytest -m "not slow" $(XDIST)
 
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest $(XDIST)
 
 bench: $(STAMP)
 	taskset -c 0 $(BIN)/python benchmarks/bench_uncertainty.py
