@@ -34,12 +34,12 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np
 
+from runtime.files import read_toml
 from runtime.ptz import PtzDriver, default_profile, parse_profile
-from runtime.ptz.profile import DEFAULT_PROFILES, DEVICES_DIR
+from runtime.ptz.profile import DEFAULT_PROFILES, PROTOCOLS, resolve_profile_path
 from tests.runtime.ptz import fuzz as ptz_fuzz
 
 OMNIJAX = str(Path(sys.executable).parent / "omnijax")
-PROTOCOLS = ("visca", "pelco-d")
 
 
 class Emulator:
@@ -204,9 +204,7 @@ def unplug(trials: int, outage_s: float, seed: int) -> dict:
 def latency(n: int) -> dict:
     out = {}
     for protocol in PROTOCOLS:
-        with (DEVICES_DIR / f"{DEFAULT_PROFILES[protocol]}.toml").open("rb") as fh:
-            import tomllib
-            mapping = tomllib.load(fh)
+        mapping = read_toml(resolve_profile_path(DEFAULT_PROFILES[protocol]), "device profile")
         mapping["link"] = {**mapping.get("link", {}), "min_interval_s": 0.0}
         profile = parse_profile(mapping, source="latency")
         emu = Emulator(protocol)

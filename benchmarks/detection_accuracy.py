@@ -39,6 +39,7 @@ from omnijax import (
     polar_range,
     sector_mask,
 )
+from omnijax.geometry import wrap_pi
 from omnijax.world import build_world, parse_scenario
 from runtime.files import load_rig, load_scenario, read_toml
 
@@ -93,20 +94,20 @@ def run_scenario(name: str, n_frames: int, measure: str, seed: int, stride: int 
                     and float(tr.r_inner[p]) >= r0 and float(tr.r_head[p]) <= r1):
                 continue
             th = float(th_all[p])
-            others = [abs(math.remainder(th - th_all[q], 2 * math.pi)) for q in range(th_all.shape[0]) if q != p]
+            others = [abs(wrap_pi(th - th_all[q])) for q in range(th_all.shape[0]) if q != p]
             best = bk = None
             for k in valid:
                 if k in used:
                     continue
-                dth = abs(math.remainder(float(d.theta_f[k]) - th, 2 * math.pi))
-                half = 0.5 * abs(math.remainder(float(d.theta_r[k] - d.theta_l[k]), 2 * math.pi)) + 0.05
+                dth = abs(wrap_pi(float(d.theta_f[k]) - th))
+                half = 0.5 * abs(wrap_pi(float(d.theta_r[k] - d.theta_l[k]))) + 0.05
                 if dth <= half and (best is None or dth < best):
                     best, bk = dth, k
             row = {"isolated": min(others, default=math.inf) > 0.35, "found": bk is not None}
             if bk is not None:
                 used.add(bk)
                 row.update(dr=float(d.r_f[bk]) - float(tr.r_f[p]), sr=float(d.sigma_r_f[bk]),
-                           dth=math.remainder(float(d.theta_f[bk]) - th, 2 * math.pi), st=float(d.sigma_theta_f[bk]))
+                           dth=wrap_pi(float(d.theta_f[bk]) - th), st=float(d.sigma_theta_f[bk]))
             people.append(row)
         false += len(valid) - len(used)
         frames_with_false += int(len(valid) > len(used))

@@ -1,4 +1,4 @@
-"""The README's pictures of the synthetic world (docs/world/*.png), from the scenarios in configs/scenarios.
+"""The pictures of the synthetic world in docs/world.md (docs/world/*.png), from the scenarios in configs/scenarios.
 
 Omni frames are cropped to the image circle; the fisheye frame is shown at half size (area
 averaging) to keep the files small. The foveal view aims the true PTZ at one person's true

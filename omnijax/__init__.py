@@ -18,7 +18,7 @@ Precision: geometry, uncertainty and Monte Carlo are meant to run in float64 (th
 1e-9); per-pixel kernels ask for float32 explicitly. Importing omnijax does not change JAX's global
 configuration: the ``omnijax`` command, the benchmarks and the tests switch float64 on at their
 start (``jax.config.update("jax_enable_x64", True)``); a program of your own should too
-(docs/design.md, "Precision").
+(docs/design.md section 3.3).
 """
 
 from .aim import (

@@ -34,7 +34,7 @@ from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray
 
 from ..camera import OmniCamera
 from ..config import Rig
-from ..geometry import pointing, world_to_image
+from ..geometry import pointing, world_to_image, wrap_pi
 
 #: The rig's unknowns, in the order of every vector and matrix here.
 GLOBAL_NAMES: tuple[str, ...] = ("H_o", "D_c", "theta_c", "H_f", "pan_zero", "tilt_zero")
@@ -118,11 +118,6 @@ class RigFit(eqx.Module):
         return jnp.sqrt(jnp.diagonal(self.cov, axis1=-2, axis2=-1))
 
 
-def _wrap(a):
-    """Angle into (-pi, pi]."""
-    return jnp.pi - jnp.mod(jnp.pi - a, 2 * jnp.pi)
-
-
 class _Unknowns(eqx.Module):
     g: Float[Array, "6"]
     e_rim: Float[Array, "3"]
@@ -157,7 +152,7 @@ def _residuals(z: _Unknowns, problem: CalibrationProblem) -> Float[Array, " M"]:
     obs = problem.obs
     pan, tilt, _ = _model(z, problem)
     return jnp.concatenate([
-        _wrap(obs.pan - pan) / obs.sigma_pan,
+        wrap_pi(obs.pan - pan) / obs.sigma_pan,
         (obs.tilt - tilt) / obs.sigma_tilt,
         z.e_rim, z.e_h[None], z.e_r, z.e_t,
     ])
@@ -168,7 +163,7 @@ def _start(problem: CalibrationProblem) -> _Unknowns:
     K = problem.obs.r_f.shape[0]
     z = _Unknowns(g=problem.start, e_rim=jnp.zeros(3), e_h=jnp.zeros(()), e_r=jnp.zeros(K), e_t=jnp.zeros(K))
     pan, tilt, _ = _model(z, problem)
-    d_pan = _wrap(problem.obs.pan - pan)
+    d_pan = wrap_pi(problem.obs.pan - pan)
     pan0 = problem.start[4] + jnp.arctan2(jnp.mean(jnp.sin(d_pan)), jnp.mean(jnp.cos(d_pan)))
     tilt0 = problem.start[5] + jnp.mean(problem.obs.tilt - tilt)
     return eqx.tree_at(lambda u: u.g, z, problem.start.at[4].set(pan0).at[5].set(tilt0))
@@ -200,7 +195,7 @@ def fit_rig(problem: CalibrationProblem, max_steps: int = 200) -> RigFit:
     pan, tilt, valid = _model(z, problem)
     return RigFit(
         values=_params(z, problem), cov=cov, chi2=jnp.sum(res**2), dof=2 * A - 6, singular=s, weakest=weakest,
-        pan_residual=_wrap(problem.obs.pan - pan), tilt_residual=problem.obs.tilt - tilt, valid=valid,
+        pan_residual=wrap_pi(problem.obs.pan - pan), tilt_residual=problem.obs.tilt - tilt, valid=valid,
         converged=sol.result == optx.RESULTS.successful, steps=sol.stats["num_steps"],
     )
 
@@ -220,7 +215,7 @@ def with_mounting_sigma(cov: Float[Array, "*b 4 4"], pan, tilt, sigma_pan_zero, 
 
 
 # --------------------------------------------------------------------------------------
-# Simulated calibrations (DESIGN.md section 5: a true rig drawn per run)
+# Simulated calibrations (docs/design.md section 5: a true rig drawn per run)
 # --------------------------------------------------------------------------------------
 
 
@@ -303,7 +298,7 @@ def simulate_calibration(
         r_f=r_det + sig_r * jax.random.normal(k_r, (n_positions,)),
         theta_f=t_det + sig_t * jax.random.normal(k_t, (n_positions,)),
         sigma_r_f=sig_r, sigma_theta_f=sig_t, position=position, height=height,
-        pan=_wrap(settings.direction[0] * p.pan + pan0 + settings.sigma_ptz * jax.random.normal(k_pan, (A,))),
+        pan=wrap_pi(settings.direction[0] * p.pan + pan0 + settings.sigma_ptz * jax.random.normal(k_pan, (A,))),
         tilt=settings.direction[1] * p.tilt + tilt0 + settings.sigma_ptz * jax.random.normal(k_tilt, (A,)),
         sigma_pan=jnp.full(A, settings.sigma_ptz), sigma_tilt=jnp.full(A, settings.sigma_ptz),
         sigma_height=settings.sigma_height, direction=settings.direction,

@@ -2,7 +2,7 @@
 
 Every radial camera maps a ray at angle ``phi`` from the downward optical axis to
 an image radius ``r = r_m * u(phi)``, with ``u(pi/2) = 1``: ``r_m`` is the horizon
-circle of DESIGN.md section 4. The profile ``u`` is what distinguishes the models;
+circle of docs/design.md section 4.1. The profile ``u`` is what distinguishes the models;
 ``r_m`` stays an explicit input so that its calibration uncertainty propagates.
 
 - :class:`Paraboloid`: the paper's parabolic mirror, ``u = tan(phi / 2)`` (eq 1, 2).

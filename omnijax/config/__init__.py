@@ -1,10 +1,13 @@
-"""Typed rig configuration: the TOML schema, validated once at the edge, and the PyTrees kernels take."""
+"""Typed rig configuration: the TOML schema, validated once at the edge, and the PyTrees kernels take.
+
+``Section``, ``validate`` and ``one_line_error`` are the schema kit every file format of
+omnijax uses (rig, scenario, PTZ profile, calibration observations).
+"""
 
 from ._config import (
     INPUT_NAMES as INPUT_NAMES,
     INPUT_UNITS as INPUT_UNITS,
     LAYOUT_NAMES as LAYOUT_NAMES,
-    ConfigError as ConfigError,
     Detection as Detection,
     Foveal as Foveal,
     LayoutSearch as LayoutSearch,
@@ -14,4 +17,12 @@ from ._config import (
     Room as Room,
     Sigmas as Sigmas,
     parse_rig as parse_rig,
+)
+from ._schema import (
+    ConfigError as ConfigError,
+    NonNeg as NonNeg,
+    Pos as Pos,
+    Section as Section,
+    one_line_error as one_line_error,
+    validate as validate,
 )

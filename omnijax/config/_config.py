@@ -14,33 +14,33 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-import pydantic
 from annotated_types import Len
 from jaxtyping import Array, Float
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from ..camera import PROFILES, OCamCalib, OmniCamera, parse_ocamcalib
+from ._schema import ConfigError, NonNeg, Pos, Section, validate
 
 # --------------------------------------------------------------------------------------
 # Kernel-side types
 # --------------------------------------------------------------------------------------
 
-#: Order of the uncertain inputs of the pointing geometry (DESIGN.md section 4, eq 13-14).
+#: Order of the uncertain inputs of the pointing geometry (docs/design.md section 3.2, eq 13-14).
 INPUT_NAMES: tuple[str, ...] = ("r_f", "theta_f", "H_o", "H_f", "D_c", "theta_c", "r_m", "H_p", "R_h")
 #: Units of the inputs, as echoed in reports.
 INPUT_UNITS: dict[str, str] = {
     "r_f": "px", "theta_f": "rad", "H_o": "m", "H_f": "m", "D_c": "m",
     "theta_c": "rad", "r_m": "px", "H_p": "m", "R_h": "m",
 }
-
-
-class ConfigError(ValueError):
-    """A rig or scenario file that does not describe a usable set-up (one-line message)."""
+#: The zoom rules of :func:`omnijax.zoom.choose_zoom` (re-exported there): eq 15 as printed, and calibrated.
+#: The schema's names, hence defined here; import them from ``omnijax.zoom``.
+ZoomRule = Literal["paper", "calibrated"]
+ZOOM_RULES: tuple[str, ...] = get_args(ZoomRule)
 
 
 class Lens(eqx.Module):
@@ -193,7 +193,7 @@ class Rig(eqx.Module):
     room: Room
     p_contain: Float[Array, ""]
     layout: LayoutSearch
-    zoom_rule: Literal["paper", "calibrated"] = eqx.field(static=True)
+    zoom_rule: ZoomRule = eqx.field(static=True)
 
     def input_mean(self, r_f, theta_f) -> Float[Array, "*b 9"]:
         """The input vector x of the pointing geometry, in :data:`INPUT_NAMES` order.
@@ -221,8 +221,6 @@ class Rig(eqx.Module):
 # TOML schema
 # --------------------------------------------------------------------------------------
 
-Pos = Annotated[float, Field(gt=0)]
-NonNeg = Annotated[float, Field(ge=0)]
 Prob = Annotated[float, Field(gt=0, lt=1)]
 Pair = Annotated[list[float], Len(2, 2)]
 PosPair = Annotated[list[Annotated[float, Field(gt=0)]], Len(2, 2)]
@@ -231,11 +229,7 @@ Point = Annotated[list[float], Len(2, 2)]
 Polygon = Annotated[list[Point], Len(3)]
 
 
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
-
-
-class OmniSection(_Section):
+class OmniSection(Section):
     model: Literal["paraboloid", "equidistant", "equisolid", "ocamcalib"]
     H_o: Pos = Field(description="height of the mirror focus / lens centre above the floor, m")
     sigma_H_o: NonNeg
@@ -263,7 +257,7 @@ class OmniSection(_Section):
         return self
 
 
-class LensSection(_Section):
+class LensSection(Section):
     zoom: Annotated[list[Annotated[float, Field(ge=1)]], Len(2)]
     fov_h_deg: Annotated[list[Annotated[float, Field(gt=0, lt=180)]], Len(2)]
 
@@ -278,7 +272,7 @@ class LensSection(_Section):
         return self
 
 
-class FovealSection(_Section):
+class FovealSection(Section):
     D_c: NonNeg = Field(description="floor distance from the omni axis to the PTZ, m")
     sigma_D_c: NonNeg
     theta_c_deg: float = Field(description="azimuth of the PTZ around the omni axis, deg")
@@ -305,7 +299,7 @@ class FovealSection(_Section):
         return self
 
 
-class PersonSection(_Section):
+class PersonSection(Section):
     H_p: Pos = Field(description="person height, m")
     sigma_H_p: NonNeg
     R_h: Pos = Field(description="head radius, m")
@@ -319,7 +313,7 @@ class PersonSection(_Section):
         return self
 
 
-class DetectionSection(_Section):
+class DetectionSection(Section):
     sensor_sigma: Pos = Field(description="sensor noise per channel, grey levels")
     x_f: Prob = Field(description="false-alarm probability of a background radial line (eq 10)")
     x_m: Prob = Field(description="miss rate per person of contrast >= c_min")
@@ -336,12 +330,12 @@ class DetectionSection(_Section):
         256, description="Monte Carlo profiles per table cell of sigma_r_f")
 
 
-class ZoomSection(_Section):
+class ZoomSection(Section):
     p_contain: Prob = Field(description="probability that the whole head is in the foveal frame")
-    rule: Literal["paper", "calibrated"] = "calibrated"
+    rule: ZoomRule = "calibrated"
 
 
-class RoomSection(_Section):
+class RoomSection(Section):
     outline: Polygon = Field(description="floor outline polygon [[x, y], ...] in m")
     exclude: list[Polygon] = Field(default_factory=list, description="excluded floor zones")
 
@@ -352,7 +346,7 @@ LANDSCAPE_DEFAULT = {1: 31, 2: 15, 3: 7, 4: 5}
 LANDSCAPE_MAX, FLOOR_POINTS_MAX = 20_000, 20_000
 
 
-class LayoutSection(_Section):
+class LayoutSection(Section):
     vary: Annotated[list[Literal["D_c", "H_f", "theta_c", "H_o"]], Len(1, 4)] = Field(
         default_factory=lambda: ["D_c", "H_f"], description="placement variables to search"
     )
@@ -392,7 +386,7 @@ class LayoutSection(_Section):
         return self
 
 
-class RigFile(_Section):
+class RigFile(Section):
     omni: OmniSection
     foveal: FovealSection
     person: PersonSection
@@ -417,20 +411,6 @@ class RigFile(_Section):
 # --------------------------------------------------------------------------------------
 # Mapping -> Rig
 # --------------------------------------------------------------------------------------
-
-
-def _one_line(exc: pydantic.ValidationError, source: str) -> str:
-    err = exc.errors()[0]
-    loc = ".".join(str(p) for p in err["loc"])
-    msg = err["msg"].removeprefix("Value error, ")
-    if err["type"] == "missing":
-        msg = "missing key"
-    elif err["type"] == "extra_forbidden":
-        msg = "unknown key"
-    value = err.get("input")
-    shown = err["type"] not in ("missing", "extra_forbidden", "value_error") and not isinstance(value, dict)
-    got = f" (got {value!r})" if shown else ""
-    return f"{source}: {loc or '(top level)'}: {msg}{got}"
 
 
 def _a(x) -> Array:
@@ -523,10 +503,7 @@ def parse_rig(
     to the config; it is the only I/O, and the caller provides it.
     Raises :class:`ConfigError` with one line naming the key and what was expected.
     """
-    try:
-        f = RigFile.model_validate(dict(data))
-    except pydantic.ValidationError as exc:
-        raise ConfigError(_one_line(exc, source)) from None
+    f = validate(RigFile, data, source)
     omni = _omni_camera(f.omni, read_text, source)
     fo = f.foveal
     lens = Lens(

@@ -8,7 +8,7 @@ measure compares the current chromaticity with the background's:
 
     d^2 = delta^T (Sigma(current) + var_factor Sigma(background))^-1 delta,
 
-the covariance of (current - background) of DESIGN.md section 4, which makes
+the covariance of (current - background) of docs/design.md section 4.4, which makes
 background d^2 chi-square with 2 degrees of freedom; eq 7's ``2 Sigma`` is N = 1.
 """
 

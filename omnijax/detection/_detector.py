@@ -23,6 +23,7 @@ from jaxtyping import Array, Bool, Float, PRNGKeyArray, UInt8
 
 from ..camera import OmniCamera
 from ..config import Rig
+from ..geometry import wrap_2pi
 from ._change import MEASURES, Background, ReferenceTerms, change_against, reference_terms
 from ._foot import FootSigmaTable, build_foot_sigma_table, foot_estimate, foot_sigma_lookup
 from ._indexing import Thresholds, build_thresholds, gather_rgb, hysteresis_sectors, window_profile
@@ -116,8 +117,8 @@ class DetectionTrace(eqx.Module):
 def sector_mask(theta_map: Float[Array, "H W"], dets: Detections, margin: float = 0.035) -> Bool[Array, "H W"]:
     """Pixels whose azimuth lies inside a valid detection's sector widened by ``margin`` (rad):
     what the background must not learn from."""
-    span = jnp.mod(dets.theta_r - dets.theta_l, 2 * jnp.pi) + 2 * margin
-    offset = jnp.mod(theta_map[..., None] - dets.theta_l + margin, 2 * jnp.pi)
+    span = wrap_2pi(dets.theta_r - dets.theta_l) + 2 * margin
+    offset = wrap_2pi(theta_map[..., None] - dets.theta_l + margin)
     return jnp.any(dets.valid & (offset <= span), axis=-1)
 
 
@@ -138,7 +139,7 @@ def _foot_sigmas(detector: Detector, i, contrast, width) -> tuple[Array, Array]:
     centre is unbiased and its error is where the two edges fall inside their lines'
     bins of width ``step``: uniform, ``step^2 / 12`` each, a quarter of their sum for the
     mean. (The paper's alternative, the sector width as a 99 % interval, overstates it
-    about tenfold in the synthetic world: README, Detection.) A sector wider than one
+    about tenfold in the synthetic world: docs/detection.md.) A sector wider than one
     person there (a vertical cylinder spans ``2 asin(rho / R)``) holds more than the
     person (two people side by side, a person and a ghost): its centre is then uniform
     over the excess width, and the centre line may miss the person's axis, so the
@@ -161,9 +162,9 @@ def _sector_angles(detector: Detector, sectors):
     step = 2 * jnp.pi / T
     theta_l = sectors.first * step
     theta_r = sectors.last * step
-    centre = jnp.mod(0.5 * (theta_l + theta_r), 2 * jnp.pi)
+    centre = wrap_2pi(0.5 * (theta_l + theta_r))
     width = (sectors.last - sectors.first + 1) * step
-    return jnp.mod(theta_l, 2 * jnp.pi), jnp.mod(theta_r, 2 * jnp.pi), centre, width
+    return wrap_2pi(theta_l), wrap_2pi(theta_r), centre, width
 
 
 def find_sectors(detector: Detector, M: Float[Array, " T"]):

@@ -1,5 +1,10 @@
-"""Dual-camera geometry (eq 1-4): image radius -> floor -> pan and tilt; floor <-> image conversions."""
+"""Dual-camera geometry (eq 1-4): image radius -> floor -> pan and tilt; floor <-> image conversions;
+angle wrapping."""
 
+from ._angles import (
+    wrap_2pi as wrap_2pi,
+    wrap_pi as wrap_pi,
+)
 from ._floor import (
     floor_measurement as floor_measurement,
     image_position as image_position,

@@ -133,7 +133,7 @@ def pointing(x: Float[Array, "*b 9"], profile: RadialProfile) -> Pointing:
 
 
 def world_to_image(omni, X, Y, Z) -> tuple[Array, Array]:
-    """Pixel (x, y) of the world point (X, Y, Z) (m, world frame of DESIGN.md section 3)."""
+    """Pixel (x, y) of the world point (X, Y, Z) (m, world frame of docs/design.md section 3.1)."""
     rho = jnp.hypot(X, Y)
     r = point_image_radius(rho, Z, omni.r_m, omni.H_o, omni.profile)
     return omni.to_pixel(r, jnp.arctan2(Y, X))

@@ -3,6 +3,7 @@
 from ._uncertainty import (
     METHODS as METHODS,
     OUTPUT_NAMES as OUTPUT_NAMES,
+    PROPAGATION_METHODS as PROPAGATION_METHODS,
     MonteCarloCovariance as MonteCarloCovariance,
     PointingCovariance as PointingCovariance,
     gum_second_order as gum_second_order,

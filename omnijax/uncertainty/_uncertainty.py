@@ -30,7 +30,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, PRNGKeyArray
 
 from ..camera import RadialProfile
-from ..geometry import floor_radius, foveal_offsets, pointing
+from ..geometry import floor_radius, foveal_offsets, pointing, wrap_pi
 
 OUTPUT_NAMES: tuple[str, ...] = ("pan", "tilt", "sin_pan", "tan_tilt")
 METHODS: tuple[str, ...] = ("autodiff", "analytic", "second_order", "montecarlo")
@@ -105,7 +105,7 @@ def _second_order_one(x, sigma, profile):
 
 
 def _analytic_one(x, sigma, profile):
-    """Eq 13 and eq 14 as printed (DESIGN.md section 4)."""
+    """Eq 13 and eq 14 as printed (docs/design.md section 4.10)."""
     r_f, theta_f, H_o, H_f, D_c, theta_c, r_m, H_p, R_h = x
     v = sigma**2
     v_rf, v_thf, v_Ho, v_Hf, v_Dc, v_thc, v_rm, v_Hp, v_Rh = v
@@ -137,6 +137,9 @@ def _analytic_one(x, sigma, profile):
 
 
 _KERNELS = {"autodiff": _autodiff_one, "analytic": _analytic_one, "second_order": _second_order_one}
+#: The methods of :func:`pointing_covariance` (:data:`METHODS` less Monte Carlo, which is
+#: :func:`pointing_covariance_mc`).
+PROPAGATION_METHODS: tuple[str, ...] = tuple(_KERNELS)
 
 
 @jax.jit
@@ -287,7 +290,7 @@ def pointing_covariance_mc(
     mean_dev = sums1 / n
     cov = (sums2 - n * np.einsum("pa,pb->pab", mean_dev, mean_dev)) / (n - 1)
     mean = np.asarray(y0) + mean_dev
-    mean[:, 0] = np.angle(np.exp(1j * mean[:, 0]))  # pan back into (-pi, pi]
+    mean[:, 0] = np.asarray(wrap_pi(mean[:, 0]))  # pan back into [-pi, pi)
     return MonteCarloCovariance(
         covariance=PointingCovariance(cov=jnp.asarray(cov.reshape(*shape, 4, 4)),
                                       valid=jnp.asarray(valid.reshape(shape))),

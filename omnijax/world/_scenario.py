@@ -26,12 +26,12 @@ from typing import Annotated, Any
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-import pydantic
 from annotated_types import Len
 from jaxtyping import Array, Bool, Float
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
-from ..config._config import ConfigError, Rig, _in_polygon, _one_line
+from ..config import ConfigError, NonNeg, Pos, Rig, Section, validate
+from ..config._config import _in_polygon
 
 # --------------------------------------------------------------------------------------
 # Kernel-side types
@@ -158,8 +158,6 @@ class Scenario(eqx.Module):
 # TOML schema
 # --------------------------------------------------------------------------------------
 
-Pos = Annotated[float, Field(gt=0)]
-NonNeg = Annotated[float, Field(ge=0)]
 Unit = Annotated[float, Field(ge=0, le=1)]
 Colour = Annotated[list[Unit], Len(3, 3)]
 PosColour = Annotated[list[Annotated[float, Field(gt=0, le=1)]], Len(3, 3)]
@@ -177,16 +175,12 @@ SKIN = ((0.70, 0.50, 0.40), (0.55, 0.37, 0.28), (0.35, 0.22, 0.15), (0.80, 0.62,
 HAIR = ((0.08, 0.06, 0.05), (0.30, 0.20, 0.10), (0.55, 0.45, 0.30), (0.45, 0.45, 0.45))
 
 
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
-
-
 def _ordered(pair: list[float], key: str) -> None:
     if pair[0] > pair[1]:
         raise ValueError(f"{key} must be [low, high] with low <= high")
 
 
-class SurfaceSection(_Section):
+class SurfaceSection(Section):
     colour: Colour = Field(description="mean albedo, linear RGB in [0, 1]")
     tile: NonNeg = Field(0.0, description="tile edge, m; 0: no tiles")
     grout: NonNeg = Field(0.006, description="width of the lines between tiles, m")
@@ -196,7 +190,7 @@ class SurfaceSection(_Section):
     texture_scale: Pos = Field(0.05, description="size of the fine texture's grain, m")
 
 
-class RoomSection(_Section):
+class RoomSection(Section):
     height: Pos = Field(description="ceiling height, m (walls stand on the rig's room.outline)")
     floor: SurfaceSection
     walls: SurfaceSection
@@ -205,7 +199,7 @@ class RoomSection(_Section):
     skirting_height: NonNeg = 0.08
 
 
-class FurnitureSection(_Section):
+class FurnitureSection(Section):
     name: str = ""
     corner_min: Point2 = Field(description="footprint corner with the smallest x and y, m")
     corner_max: Point2 = Field(description="footprint corner with the largest x and y, m")
@@ -219,7 +213,7 @@ class FurnitureSection(_Section):
         return self
 
 
-class PeopleSection(_Section):
+class PeopleSection(Section):
     count: Annotated[int, Field(ge=0, le=64)]
     speed: Range = Field([0.8, 1.4], description="preferred walking speed range, m/s")
     pause_probability: Unit = 0.3
@@ -239,7 +233,7 @@ class PeopleSection(_Section):
         return self
 
 
-class LampSection(_Section):
+class LampSection(Section):
     position: Point3 = Field(description="lamp position x, y, z in m (world frame)")
     intensity: NonNeg = Field(description="grey level of a white surface 1 m away, facing the lamp")
     on: bool = Field(True, description="on at t = 0")
@@ -252,19 +246,19 @@ class LampSection(_Section):
         return self
 
 
-class DriftSection(_Section):
+class DriftSection(Section):
     amplitude: Annotated[float, Field(ge=0, lt=1)] = 0.0
     period: Pos = Field(60.0, description="period of the drift, s")
 
 
-class LightingSection(_Section):
+class LightingSection(Section):
     spectrum: PosColour = Field(description="RGB of the one spectrum all lamps and the ambient share")
     ambient: NonNeg
     drift: DriftSection = DriftSection()
     lamps: list[LampSection] = Field(default_factory=list)
 
 
-class SensorSection(_Section):
+class SensorSection(Section):
     noise_sigma: NonNeg | None = Field(None, description="grey levels; default: the rig's detection.sensor_sigma")
     vignetting: Annotated[float, Field(ge=0, lt=1)] = 0.0
     jpeg_quality: Annotated[int, Field(ge=1, le=100)] | None = None
@@ -272,7 +266,7 @@ class SensorSection(_Section):
     shadow_downsample: Annotated[int, Field(ge=1, le=8)] = 4
 
 
-class ScenarioFile(_Section):
+class ScenarioFile(Section):
     name: str
     rig: str = Field(description="rig TOML file, relative to this scenario file")
     fps: Pos = 25.0
@@ -286,10 +280,7 @@ class ScenarioFile(_Section):
 
 def read_scenario_header(data: Mapping[str, Any], *, source: str = "scenario") -> ScenarioFile:
     """Validate a parsed scenario mapping against the schema (rig not yet needed)."""
-    try:
-        return ScenarioFile.model_validate(dict(data))
-    except pydantic.ValidationError as exc:
-        raise ConfigError(_one_line(exc, source)) from None
+    return validate(ScenarioFile, data, source)
 
 
 # --------------------------------------------------------------------------------------

@@ -3,7 +3,7 @@
 The room stands on the rig's floor outline (``rig.room.outline``): a floor at
 z = 0, vertical walls along the outline's edges up to the ceiling at the
 scenario's ``room.height``, and furniture boxes on the floor. Rays are
-``origin + t * direction`` in the world frame of DESIGN.md section 3 (metres,
+``origin + t * direction`` in the world frame of docs/design.md section 3.1 (metres,
 z up); ``direction`` need not be unit length, and ``t`` is in its units.
 
 Light (see ``_scenario``): the grey level of a surface point is

@@ -6,7 +6,7 @@ label image and the :class:`Truth`. A world is
 a :class:`Scene` (rig, people, room, static view) plus the walks and the lighting
 of every frame; the renderer takes the scene and one :class:`FrameState`.
 
-DESIGN.md section 5: calibration errors are systematic, so the world draws its
+docs/design.md section 5: calibration errors are systematic, so the world draws its
 *true* rig once per seed from the configured rig and its calibration sigmas
 (:func:`draw_true_rig`: H_o, r_m, H_f, D_c, theta_c) and each person's H_p and
 R_h from the person priors, renders with the true values and reports them; the

@@ -1,5 +1,9 @@
 """Zoom from the propagated pointing uncertainty: eq 15 as printed and the calibrated rule."""
 
+from ..config._config import (
+    ZOOM_RULES as ZOOM_RULES,
+    ZoomRule as ZoomRule,
+)
 from ._zoom import (
     ZoomChoice as ZoomChoice,
     choose_zoom as choose_zoom,

@@ -36,6 +36,7 @@ from jax.scipy.special import erf, ndtri
 from jaxtyping import Array, Bool, Float
 
 from ..config import Lens
+from ..config._config import ZOOM_RULES
 
 _GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(64)
 #: The calibrated rule's root finder stops once the containment probability's normal
@@ -235,7 +236,7 @@ def choose_zoom(lens: Lens, rule: str, cov4: Float[Array, "4 4"], distance, tilt
     elif rule == "calibrated":
         zoom = _choose_calibrated(lens, cov4, tilt, slant, R_h, p_contain)
     else:
-        raise ValueError(f"zoom rule must be 'paper' or 'calibrated', got {rule!r}")
+        raise ValueError(f"zoom rule must be one of {ZOOM_RULES}, got {rule!r}")
     fov_h, fov_v = lens.fov(zoom)
     prob = containment_probability(lens, zoom, cov4[:2, :2], tilt, slant, R_h)
     return ZoomChoice(zoom=zoom, fov_h=fov_h, fov_v=fov_v, probability=prob, feasible=prob >= p_contain)

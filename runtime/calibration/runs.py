@@ -17,10 +17,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import pydantic
 import tomlkit
 from annotated_types import Len
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 from scipy.stats import chi2 as chi2_dist
 
 from omnijax import (
@@ -45,6 +44,7 @@ from omnijax import (
     with_mounting_sigma,
     world_to_image,
 )
+from omnijax.config import Section, validate
 
 #: Smallest ratio of the whitened Jacobian's smallest to largest singular value for a determined rig.
 MIN_CONDITION = 1e-10
@@ -69,18 +69,14 @@ Finite = Annotated[float, Field(allow_inf_nan=False)]
 PosFinite = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
 
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
-
-
-class AimEntry(_Section):
+class AimEntry(Section):
     height_m: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(
         description="height of the mark the PTZ was centred on, above the floor (m)")
     pan_deg: Finite = Field(description="the PTZ's pan reading, device degrees")
     tilt_deg: Finite = Field(description="the PTZ's tilt reading, device degrees")
 
 
-class PositionEntry(_Section):
+class PositionEntry(Section):
     label: str | None = None
     r_f: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(description="foot image radius, px")
     theta_f: Finite = Field(description="foot azimuth, rad")
@@ -89,7 +85,7 @@ class PositionEntry(_Section):
     aims: Annotated[list[AimEntry], Len(1)]
 
 
-class ObservationsFile(_Section):
+class ObservationsFile(Section):
     comment: str | None = None
     sigma_pan_deg: PosFinite = 0.1
     sigma_tilt_deg: PosFinite = 0.1
@@ -97,24 +93,12 @@ class ObservationsFile(_Section):
     positions: Annotated[list[PositionEntry], Len(1)]
 
 
-def _one_line(exc: pydantic.ValidationError, source: str) -> str:
-    err = exc.errors()[0]
-    loc = ".".join(str(p) for p in err["loc"])
-    msg = {"missing": "missing key", "extra_forbidden": "unknown key"}.get(err["type"], err["msg"])
-    value = err.get("input")
-    shown = err["type"] not in ("missing", "extra_forbidden") and not isinstance(value, (dict, list))
-    return f"{source}: {loc or '(top level)'}: {msg}" + (f" (got {value!r})" if shown else "")
-
-
 def parse_observations(data, rig: Rig, direction: tuple[int, int], source: str = "observations") -> Observations:
-    """Validate an OBS.json mapping (see README "Calibration") and build :class:`Observations`.
+    """Validate an OBS.json mapping (see docs/calibration.md) and build :class:`Observations`.
 
     Positions without sigmas take the rig's ``[detection]`` ones; readings become radians.
     """
-    try:
-        f = ObservationsFile.model_validate(data)
-    except pydantic.ValidationError as exc:
-        raise ConfigError(_one_line(exc, source)) from None
+    f = validate(ObservationsFile, data, source)
     pos = f.positions
     aims = [(k, a) for k, p in enumerate(pos) for a in p.aims]
     A = len(aims)

@@ -30,8 +30,9 @@ DEFAULT_SIZES = ("640x480", "1920x1920")
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scenario", default="configs/scenarios/three_people.toml", metavar="FILE",
-                   help="scenario TOML whose rig is scaled to each size (default: %(default)s)")
+    p.add_argument("--scenario", default="three_people", metavar="S",
+                   help="scenario TOML, or a name in configs/scenarios, whose rig is scaled to each size "
+                        "(default: %(default)s)")
     p.add_argument("--sizes", nargs="+", default=list(DEFAULT_SIZES), metavar="WxH",
                    help="frame sizes to measure (default: %(default)s)")
     p.add_argument("--frames", type=int, default=200, metavar="N",
@@ -56,13 +57,13 @@ def _parse_size(text: str) -> tuple[int, int]:
 def run(args: argparse.Namespace) -> int:
     import os
 
+    from runtime.cli._options import scenario_file
     from runtime.errors import UsageError
 
     sizes = [_parse_size(s) for s in args.sizes]
     if args.frames < 10:
         raise UsageError(f"--frames: expected at least 10 timed calls, got {args.frames}")
-    if not os.path.isfile(args.scenario):
-        raise UsageError(f"--scenario: no such scenario file {args.scenario!r}")
+    scenario = str(scenario_file(args.scenario))
     if hasattr(os, "sched_getaffinity") and args.core not in os.sched_getaffinity(0):
         raise UsageError(f"--core: core {args.core} is not available to this process")
 
@@ -71,9 +72,9 @@ def run(args: argparse.Namespace) -> int:
     pin_to_one_core(args.core)
     from runtime.bench.detector import bench_size
 
-    report = {"cores": 1, "scenario": args.scenario}
+    report = {"cores": 1, "scenario": scenario}
     for w, h in sizes:
-        report[f"{w}x{h}"] = bench_size(args.scenario, (w, h), args.frames, progress=not args.json)
+        report[f"{w}x{h}"] = bench_size(scenario, (w, h), args.frames, progress=not args.json)
     if args.json:
         print(json.dumps(report, indent=2))
     else:

@@ -8,7 +8,7 @@ import math
 HELP = "calibrate a rig from a frame and PTZ observations (or simulate calibrations)"
 DESCRIPTION = """\
 From one omni frame: the mirror rim / fisheye image circle (centre and r_m, with
-their covariance). From observations (OBS.json, see the README): H_o, D_c,
+their covariance). From observations (OBS.json, see docs/calibration.md): H_o, D_c,
 theta_c, H_f and the PTZ's pan/tilt zero offsets by least squares, with their
 covariance; the observations' own noise (detector, marks' heights, rim) is
 carried as nuisance parameters.
@@ -44,6 +44,8 @@ def _ints(text: str) -> list[int]:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from runtime.cli._options import add_ptz_profile_option, deprecated_alias
+
     p = sub.add_parser("calibrate", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", required=True, metavar="FILE", help="rig TOML file (the starting rig)")
@@ -51,10 +53,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frame", metavar="IMAGE",
                    help="one omni frame (any image OpenCV reads) to fit the rim on; without it the rig "
                         "file's centre and r_m (with its sigma_r_m) are used")
-    p.add_argument("--observations", metavar="OBS", help="observations JSON (see the README)")
-    p.add_argument("--ptz-profile", metavar="P",
-                   help="PTZ device profile (name or file): its mounting directions are used, its zero "
-                        "offsets are the start, and DIR/<profile>.toml gets the fitted ones")
+    p.add_argument("--observations", metavar="OBS", help="observations JSON (see docs/calibration.md)")
+    add_ptz_profile_option(p, "PTZ device profile (name or file): its mounting directions are used, its zero "
+                              "offsets are the start, and DIR/<profile>.toml gets the fitted ones", alias=False)
     p.add_argument("--simulate", type=int, metavar="N", help="run N simulated calibrations per K instead")
     p.add_argument("--positions", type=_ints, default=[4, 8, 16], metavar="K,K",
                    help="simulate: floor positions per calibration (default 4,8,16)")
@@ -62,8 +63,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="simulate: heights of the marks aimed at above each position (default 0,1.5 m)")
     p.add_argument("--sigma-ptz-deg", type=float, default=0.1, metavar="DEG",
                    help="simulate: PTZ reading / aiming noise per axis (default 0.1 deg)")
-    p.add_argument("--sigma-height", type=float, default=0.005, metavar="M",
-                   help="simulate: error of the marks' heights (default 0.005 m)")
+    deprecated_alias(p, "--sigma-height", p.add_argument(
+        "--sigma-height-m", type=float, default=0.005, metavar="M",
+        help="simulate: error of the marks' heights, as OBS.json's sigma_height_m (default 0.005 m)"))
     p.add_argument("--sigma-zero-deg", type=float, default=2.0, metavar="DEG",
                    help="simulate: spread of the true pan/tilt zero offsets (default 2 deg)")
     p.add_argument("--seed", type=int, default=0, help="simulate: random seed (default 0)")
@@ -80,14 +82,11 @@ def _profile(args):
     """(profile or None, its path, mounting directions, zero offsets in rad)."""
     if args.ptz_profile is None:
         return None, None, (1, 1), (0.0, 0.0)
-    from runtime.errors import UsageError
-    from runtime.ptz.profile import ProfileError, load_profile, resolve_profile_path
+    from runtime.cli._options import load_ptz_profile
+    from runtime.ptz.profile import resolve_profile_path
 
     path = resolve_profile_path(args.ptz_profile)
-    try:
-        prof = load_profile(path)
-    except ProfileError as exc:
-        raise UsageError(f"--ptz-profile: {exc}") from None
+    prof = load_ptz_profile(args.ptz_profile)
     m = prof.mounting
     return prof, path, (m.pan_direction, m.tilt_direction), (math.radians(m.pan_zero_deg),
                                                               math.radians(m.tilt_zero_deg))
@@ -105,7 +104,7 @@ def _check_args(args) -> None:
             raise UsageError(f"--positions: expected numbers of floor positions >= 3, got {args.positions}")
         if len(set(args.heights)) < 2 or min(args.heights) < 0:
             raise UsageError(f"--heights: expected two different mark heights >= 0 at least, got {args.heights}")
-        for flag, v in (("--sigma-ptz-deg", args.sigma_ptz_deg), ("--sigma-height", args.sigma_height),
+        for flag, v in (("--sigma-ptz-deg", args.sigma_ptz_deg), ("--sigma-height-m", args.sigma_height_m),
                         ("--sigma-zero-deg", args.sigma_zero_deg)):
             if not (v >= 0 and math.isfinite(v)):
                 raise UsageError(f"{flag}: expected a finite sigma >= 0, got {v}")
@@ -307,7 +306,7 @@ def _simulate(args, rig, profile) -> int:
     _, prof_path, direction, zero = profile
     settings = SimulationSettings(
         heights=jnp.asarray(args.heights, float), sigma_ptz=jnp.asarray(math.radians(args.sigma_ptz_deg)),
-        sigma_height=jnp.asarray(args.sigma_height), sigma_zero=jnp.asarray(math.radians(args.sigma_zero_deg)),
+        sigma_height=jnp.asarray(args.sigma_height_m), sigma_zero=jnp.asarray(math.radians(args.sigma_zero_deg)),
         zero=jnp.asarray(zero), sigma_center=rig.sigmas.r_m, direction=jnp.asarray(direction, float),
         min_ptz_distance=jnp.asarray(0.5),
     )
@@ -333,7 +332,7 @@ def _simulate(args, rig, profile) -> int:
     report = {
         "config": str(args.config), "camera_model": rig.omni.model, "simulate": args.simulate, "seed": args.seed,
         "settings": {"positions": args.positions, "heights_m": args.heights, "sigma_ptz_deg": args.sigma_ptz_deg,
-                     "sigma_height_m": args.sigma_height, "sigma_zero_deg": args.sigma_zero_deg,
+                     "sigma_height_m": args.sigma_height_m, "sigma_zero_deg": args.sigma_zero_deg,
                      "sigma_center_px": float(s.r_m), "sigma_r_f": float(rig.detection.sigma_r_f),
                      "sigma_theta_f_deg": math.degrees(float(rig.detection.sigma_theta_f)),
                      "profile": str(prof_path) if prof_path else None},

@@ -21,7 +21,7 @@ misses and false alarms, the foot position error on the floor, and for each
 frame with a target whether the true head would be inside the PTZ frame for
 both zoom rules (the paper's and the calibrated one), and its width in pixels.
 
-Writes DIR/summary.json (DESIGN.md section 7), DIR/log.jsonl (one line per
+Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line per
 frame), DIR/annotated.mp4 (the operator's view: the omni frame with sectors,
 centre lines, feet, heads, tracks with 95 % ellipses, and the foveal view
 rendered from the synthetic world at the emulated PTZ's actual position) and
@@ -33,11 +33,11 @@ DIR/view.png (one frame of it).
 returning, the source ending early); the summary counts each.
 """
 
-DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent.parent / "configs" / "scenarios" / "three_people.toml"
+DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "three_people.toml"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from runtime.cli.run import add_loop_options
+    from runtime.cli._options import PACES, PROTOCOLS, add_loop_options
 
     p = sub.add_parser("demo", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -47,10 +47,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", type=int, default=1000, metavar="N",
                    help="scenario frames, background learning (the first 240) included (default 1000: 40 s at 25 fps)")
     p.add_argument("--seed", type=int, metavar="K", help="world seed (default: the scenario's)")
-    p.add_argument("--pace", choices=("live", "all"), default="live",
+    p.add_argument("--pace", choices=PACES, default="live",
                    help="live: frames arrive at the scenario's rate, late ones are dropped (default); "
                         "all: every frame is processed, as fast as possible")
-    p.add_argument("--protocol", choices=("visca", "pelco-d"), default="visca", help="emulated PTZ (visca)")
+    p.add_argument("--protocol", choices=PROTOCOLS, default="visca", metavar="NAME",
+                   help="protocol of the emulated PTZ: %(choices)s (default visca)")
     p.add_argument("--inset-every", type=int, default=8, metavar="K",
                    help="re-render the foveal inset every K frames (default 8; ray casting is slow)")
     p.add_argument("--background-step", type=int, default=8, metavar="K",
@@ -60,19 +61,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="save the view of the N-th processed frame as DIR/view.png (default 150)")
     add_loop_options(p)
     p.set_defaults(func=run)
-
-
-def _scenario_path(spec: str) -> Path:
-    from runtime.errors import UsageError
-
-    path = Path(spec)
-    if path.is_file():
-        return path
-    named = DEFAULT_SCENARIO.parent / f"{spec}.toml"
-    if named.is_file():
-        return named
-    names = ", ".join(sorted(p.stem for p in DEFAULT_SCENARIO.parent.glob("*.toml")))
-    raise UsageError(f"--scenario: {spec}: no such file or scenario name (known: {names})")
 
 
 class FovealInset:
@@ -109,10 +97,10 @@ class FovealInset:
 
 
 def run(args: argparse.Namespace) -> int:
-    from runtime.cli.run import check_loop_options, loop_config, parse_faults
+    from runtime.cli._options import load_ptz_profile, loop_config, parse_faults, scenario_file
     from runtime.errors import UsageError
 
-    check_loop_options(args)
+    config = loop_config(args)
     if args.background_step < 1:
         raise UsageError(f"--background-step: expected a positive count, got {args.background_step}")
     n_bg = 30 * args.background_step
@@ -122,11 +110,11 @@ def run(args: argparse.Namespace) -> int:
     if args.inset_every < 1:
         raise UsageError(f"--inset-every: expected a positive count, got {args.inset_every}")
     plan = parse_faults(args.faults)
-    scenario = _scenario_path(args.scenario)
+    scenario = scenario_file(args.scenario)
 
     from omnijax.world import build_world
     from runtime.files import load_scenario
-    from runtime.ptz import PtzDriver, PtzError, default_profile
+    from runtime.ptz import PtzDriver, PtzError
     from runtime.ptz.child import EmulatorProcess
     from runtime.realtime.session import run_session
     from runtime.realtime.sources import FaultySource, SyntheticSource
@@ -142,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
     synthetic = SyntheticSource(world)
     source = FaultySource(synthetic, plan) if not plan.empty else synthetic
     scorer = DemoScorer(world, synthetic)
-    profile = default_profile(args.protocol)
+    profile = load_ptz_profile(None, args.protocol)
     with EmulatorProcess(args.protocol) as emulator:
         driver = PtzDriver(str(emulator.link), profile)
         try:
@@ -172,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
               "compiling ...", file=sys.stderr, flush=True)
         try:
             summary = run_session(
-                rig, source, Path(args.out), driver=driver, profile=profile, config=loop_config(args),
+                rig, source, Path(args.out), driver=driver, profile=profile, config=config,
                 paced=args.pace == "live", background_frames=30, background_step=args.background_step,
                 video=not args.no_video, record=args.record, title=f"OMNI 1  {sc.name}",
                 foveal=FovealInset(world, emulator, args.inset_every), hooks=(scorer, unplug), finish=finish,

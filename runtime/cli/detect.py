@@ -25,6 +25,8 @@ OpenCV's MOG2 after both have learnt the scene (no --config needed).
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from runtime.cli._options import deprecated_alias
+
     p = sub.add_parser("detect", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("source", metavar="SOURCE", help="video file or folder of images")
@@ -34,7 +36,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="frames to learn the background from (default: [detection] background_frames; "
                         "--change-only: 60)")
     p.add_argument("--overlay-every", type=int, default=25, metavar="K", help="overlay PNG every K frames (25)")
-    p.add_argument("--limit", type=int, metavar="N", help="stop after N frames")
+    deprecated_alias(p, "--limit", p.add_argument(
+        "--frames", type=int, metavar="N", help="read at most N frames of SOURCE, background learning included"))
     p.add_argument("--change-only", action="store_true",
                    help="per-pixel change masks only, compared with MOG2 (perspective footage)")
     p.add_argument("--pixel-fa", type=float, default=1e-3, metavar="P",
@@ -53,7 +56,7 @@ def _check_args(args) -> None:
 
     if not args.change_only and not args.config:
         raise UsageError("--config is required (or use --change-only for non-omnidirectional footage)")
-    for name in ("background_frames", "overlay_every", "limit"):
+    for name in ("background_frames", "overlay_every", "frames"):
         v = getattr(args, name)
         if v is not None and v < (3 if name == "background_frames" else 1):
             raise UsageError(f"--{name.replace('_', '-')}: expected a positive count, got {v}")
@@ -114,7 +117,7 @@ def _run_detector(args) -> int:
     rate = rig.detection.adapt_rate if args.adapt_rate is None else args.adapt_rate
     W, H = rig.omni.image_size
     try:
-        frames = read_frames(args.source, args.limit)
+        frames = read_frames(args.source, args.frames)
         training = _learn(frames, n_bg, args.source)
         if training.shape[1:] != (H, W, 3):
             raise UsageError(f"{args.source}: frames are {training.shape[2]}x{training.shape[1]}, "
@@ -193,7 +196,7 @@ def _run_change_only(args) -> int:
     cv2.setNumThreads(1)
     mog2 = cv2.createBackgroundSubtractorMOG2(history=500, detectShadows=True)
     try:
-        frames = read_frames(args.source, args.limit)
+        frames = read_frames(args.source, args.frames)
         training = _learn(frames, n_bg, args.source)
         for f in training:
             mog2.apply(cv2.cvtColor(f, cv2.COLOR_RGB2BGR))

@@ -30,54 +30,45 @@ and var tan tilt, eq 14 and 13's quantities); and landscape.png (the grid over
 D_c and H_f: the objective, mean var sin pan, mean var tan tilt, the other
 objective).
 
-Flags override the [layout] keys of the same name (see configs/paper.toml).
+Flags override the [layout] keys they name (--grid-step-m: grid_step; see
+configs/paper.toml).
 The search's BFGS program compiles on a second thread while the landscape grid
 runs; compiled programs are cached in --cache-dir (JAX's persistent compilation
 cache), so later runs skip most of the compilation.
 """
 
-#: Flag -> [layout] key.
-OVERRIDES = {"objective": "objective", "statistic": "statistic", "vary": "vary", "grid_step": "grid_step",
+#: Option (dest) -> [layout] key.
+OVERRIDES = {"objective": "objective", "statistic": "statistic", "vary": "vary", "grid_step_m": "grid_step",
              "starts": "starts", "landscape": "landscape", "near_radius": "near_radius",
-             "face_target": "face_target_px"}
+             "face_target_px": "face_target_px"}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from runtime.cli._options import add_cache_options, deprecated_alias
+    from runtime.settings import Names
+
     p = sub.add_parser("optimise", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", required=True, metavar="FILE", help="rig TOML file")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
-    p.add_argument("--objective", choices=("face_px", "variance"), help="what to optimise (layout.objective)")
-    p.add_argument("--statistic", choices=("mean", "worst"), help="over the floor (layout.statistic)")
-    p.add_argument("--vary", nargs="+", choices=("D_c", "H_f", "theta_c", "H_o"), metavar="NAME",
-                   help="placement variables to search: D_c H_f theta_c H_o (layout.vary)")
-    p.add_argument("--grid-step", type=float, metavar="M", help="floor grid spacing in m (layout.grid_step)")
+    p.add_argument("--objective", choices=Names("optimise:OBJECTIVES"), metavar="NAME",
+                   help="what to optimise: %(choices)s (layout.objective)")
+    p.add_argument("--statistic", choices=Names("optimise:STATISTICS"), metavar="NAME",
+                   help="over the floor: %(choices)s (layout.statistic)")
+    p.add_argument("--vary", nargs="+", choices=Names("omnijax.config:LAYOUT_NAMES"), metavar="NAME",
+                   help="placement variables to search: %(choices)s (layout.vary)")
+    deprecated_alias(p, "--grid-step", p.add_argument("--grid-step-m", type=float, metavar="M",
+                                                      help="floor grid spacing in m (layout.grid_step)"))
     p.add_argument("--starts", type=int, metavar="N", help="BFGS starts (layout.starts)")
     p.add_argument("--landscape", type=int, metavar="N", help="grid values per varied variable (layout.landscape)")
     p.add_argument("--near-radius", type=float, metavar="M",
                    help="left out around the PTZ's foot, m (layout.near_radius)")
-    p.add_argument("--face-target", type=float, metavar="PX",
-                   help="face width bounding the operational region, px (layout.face_target_px)")
-    p.add_argument("--cache-dir", metavar="DIR", default=None,
-                   help="JAX compilation cache (default: $XDG_CACHE_HOME/omnijax/xla or ~/.cache/omnijax/xla)")
-    p.add_argument("--no-cache", action="store_true", help="compile everything afresh, cache nothing")
+    deprecated_alias(p, "--face-target", p.add_argument(
+        "--face-target-px", type=float, metavar="PX",
+        help="face width bounding the operational region, px (layout.face_target_px)"))
+    add_cache_options(p)
     p.add_argument("--no-maps", action="store_true", help="write layout.json only")
     p.set_defaults(func=run)
-
-
-def _enable_cache(args) -> str | None:
-    import os
-    from pathlib import Path
-
-    import jax
-
-    if args.no_cache:
-        return None
-    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    path = Path(args.cache_dir) if args.cache_dir else base / "omnijax" / "xla"
-    jax.config.update("jax_compilation_cache_dir", str(path))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-    return str(path)
 
 
 #: How ``layout.json`` names each placement variable (and its unit).
@@ -135,7 +126,7 @@ def _findings(result, rig) -> dict | None:
 
 
 def layout_report(result, rig, seconds: float, timing: dict, config: str) -> dict:
-    """The ``layout.json`` object (DESIGN.md section 7's keys and more)."""
+    """The ``layout.json`` object (docs/design.md section 7.3's keys and more)."""
     from optimise import SENSE, SHARPNESS
 
     spec = rig.layout
@@ -190,13 +181,14 @@ def run(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
+    from runtime.cli._options import enable_cache
     from runtime.errors import UsageError
     from runtime.files import load_rig
     from runtime.output import dumps, staged_output
 
     t0 = time.perf_counter()
     overrides = {key: getattr(args, flag) for flag, key in OVERRIDES.items() if getattr(args, flag) is not None}
-    cache = _enable_cache(args)
+    cache = enable_cache(args)
     rig = load_rig(args.config, overrides={"layout": overrides})
 
     import jax

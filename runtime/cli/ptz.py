@@ -23,13 +23,16 @@ not reached in time, 2 bad arguments or profile.
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from runtime.cli._options import PROTOCOLS, add_ptz_profile_option, deprecated_alias
+
     p = sub.add_parser("ptz", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--port", required=True, metavar="URL", help="pyserial URL of the camera's serial line")
-    p.add_argument("--profile", metavar="P",
-                   help="device profile: a TOML file or a name in configs/devices (default: per --protocol)")
-    p.add_argument("--protocol", choices=("visca", "pelco-d"), default="visca",
-                   help="shipped profile to use when --profile is not given (default visca)")
+    deprecated_alias(p, "--port", p.add_argument("--ptz", metavar="URL",
+                                                   help="pyserial URL of the camera's serial line (required)"))
+    add_ptz_profile_option(p, "device profile: a TOML file or a name in configs/devices (default: per --protocol)")
+    p.add_argument("--protocol", choices=PROTOCOLS, metavar="NAME",
+                   help="%(choices)s: the shipped profile to use when --ptz-profile is not given (default visca); "
+                        "with --ptz-profile, the protocol it must have")
     p.add_argument("--pan-deg", type=float, metavar="DEG", help="target pan, omnijax frame (deg)")
     p.add_argument("--tilt-deg", type=float, metavar="DEG", help="target tilt, omnijax frame (deg, up positive)")
     p.add_argument("--zoom", type=float, metavar="Z", help="target zoom factor")
@@ -42,14 +45,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from runtime.cli._options import load_ptz_profile
     from runtime.errors import UsageError
     from runtime.output import dumps
-    from runtime.ptz import ProfileError, PtzDriver, PtzError, default_profile, load_profile
+    from runtime.ptz import PtzDriver, PtzError
 
-    try:
-        profile = load_profile(args.profile) if args.profile else default_profile(args.protocol)
-    except ProfileError as exc:
-        raise UsageError(str(exc)) from None
+    if args.ptz is None:
+        raise UsageError("--ptz: expected the camera's pyserial URL (/dev/ttyUSB0, socket://host:port, ...)")
+    profile = load_ptz_profile(args.ptz_profile, args.protocol)
     given = [v is not None for v in (args.pan_deg, args.tilt_deg, args.zoom)]
     if any(given) and not all(given):
         raise UsageError("--pan-deg, --tilt-deg, --zoom: give all three, or none to only ask the position")
@@ -59,8 +62,8 @@ def run(args: argparse.Namespace) -> int:
         if not value > 0:
             raise UsageError(f"{flag}: expected a positive number of seconds, got {value}")
 
-    report: dict = {"port": args.port, "profile": profile.name, "protocol": profile.protocol}
-    driver = PtzDriver(args.port, profile)
+    report: dict = {"port": args.ptz, "profile": profile.name, "protocol": profile.protocol}
+    driver = PtzDriver(args.ptz, profile)
     try:
         driver.connect(timeout=args.timeout)
     except PtzError as exc:
@@ -76,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
             report["reached"] = reached
         pos = driver.query_position()
     except (PtzError, TimeoutError) as exc:
-        print(f"omnijax ptz: {args.port}: {exc or 'no answer'}", file=sys.stderr)
+        print(f"omnijax ptz: {args.ptz}: {exc or 'no answer'}", file=sys.stderr)
         return 1
     finally:
         driver.disconnect()
@@ -91,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
         print(dumps(report))
     else:
         p = report["position"]
-        print(f"{profile.name} on {args.port}: pan {p['pan_deg']:.2f} deg, tilt {p['tilt_deg']:.2f} deg, "
+        print(f"{profile.name} on {args.ptz}: pan {p['pan_deg']:.2f} deg, tilt {p['tilt_deg']:.2f} deg, "
               f"zoom {p['zoom']:.2f}x (device: pan {p['device']['pan_deg']:.2f} deg, "
               f"tilt {p['device']['tilt_deg']:.2f} deg, units {pan_u} {tilt_u} {zoom_u})")
         if "target" in report:

@@ -1,4 +1,4 @@
-"""``omnijax ptz-emulator``: a VISCA or Pelco-D camera on a pseudo-terminal (DESIGN.md section 7)."""
+"""``omnijax ptz-emulator``: a VISCA or Pelco-D camera on a pseudo-terminal (docs/design.md section 7.4)."""
 
 from __future__ import annotations
 
@@ -25,14 +25,15 @@ reopen the same path after the emulator is restarted.
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from runtime.cli._options import PROTOCOLS, add_ptz_profile_option
+
     p = sub.add_parser("ptz-emulator", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--protocol", required=True, choices=("visca", "pelco-d"))
+    p.add_argument("--protocol", required=True, choices=PROTOCOLS, metavar="NAME", help="%(choices)s")
     p.add_argument("--address", type=int, metavar="N",
                    help="camera address (VISCA: place on the chain, 1-7; Pelco-D: 1-255); default: the profile's")
-    p.add_argument("--profile", metavar="P",
-                   help="device profile: a TOML file or a name in configs/devices "
-                        "(default: sony_evi_d70 for visca, pelco_d_dome for pelco-d)")
+    add_ptz_profile_option(p, "device profile: a TOML file or a name in configs/devices "
+                              "(default: sony_evi_d70 for visca, pelco_d_dome for pelco-d)")
     p.add_argument("--state-file", metavar="F", help="keep F updated with the camera's state (JSON)")
     p.add_argument("--link", metavar="PATH", help="keep a symlink PATH pointing at the pty")
     p.add_argument("--faults", default="", metavar="SPEC",
@@ -42,15 +43,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from runtime.cli._options import load_ptz_profile
     from runtime.errors import UsageError
-    from runtime.ptz import Faults, ProfileError, PtyEmulator, default_profile, load_profile
+    from runtime.ptz import Faults, PtyEmulator
 
-    try:
-        profile = load_profile(args.profile) if args.profile else default_profile(args.protocol)
-    except ProfileError as exc:
-        raise UsageError(str(exc)) from None
-    if profile.protocol != args.protocol:
-        raise UsageError(f"--profile: {args.profile} is a {profile.protocol} profile, not {args.protocol}")
+    profile = load_ptz_profile(args.ptz_profile, args.protocol)
     top = 7 if args.protocol == "visca" else 255
     if args.address is not None and not 1 <= args.address <= top:
         raise UsageError(f"--address: expected 1-{top} for {args.protocol}, got {args.address}")

@@ -16,8 +16,8 @@ camera and write to DIR:
                           persons [{id, foot_m [x, y], head_m [x, y, z] (head centre),
                           r_f (px), theta_f (rad) of the true foot, pixel, r_inner,
                           r_head, H_p_m, R_h_m, in_image, foot_visible, area_px, moving}]
-  world.json              the true rig drawn from the configured one (DESIGN.md 5), the
-                          people (sizes, colours, contrast against the floor), the sensor
+  world.json              the true rig drawn from the configured one (docs/design.md section 5),
+                          the people (sizes, colours, contrast against the floor), the sensor
   frames/NNNNNN.png       every K-th frame with --png-every K
   foveal/NNNNNN_pI.png    with --foveal-every K: the PTZ aimed exactly at each person's
                           true head (true rig, eq 1-4) at --foveal-zoom
@@ -34,7 +34,7 @@ CODECS = {"ffv1": ("FFV1", "omni.avi"), "mjpg": ("MJPG", "omni.avi"), "mp4v": ("
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scenario", required=True, metavar="FILE", help="scenario TOML file")
+    p.add_argument("--scenario", required=True, metavar="S", help="scenario TOML, or a name in configs/scenarios")
     p.add_argument("--frames", required=True, type=int, metavar="N", help="number of frames to render")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
     p.add_argument("--seed", type=int, help="override the scenario's seed")
@@ -101,13 +101,14 @@ def run(args: argparse.Namespace) -> int:
 
     from omnijax import ConfigError
     from omnijax.world import build_world
+    from runtime.cli._options import scenario_file
     from runtime.errors import UsageError
     from runtime.files import load_scenario
     from runtime.output import dumps, staged_output
     from runtime.validation.truth import truth_line, world_summary
 
     _check(args)
-    rig, scenario = load_scenario(args.scenario)
+    rig, scenario = load_scenario(scenario_file(args.scenario))
     try:
         world = build_world(rig, scenario, seed=args.seed, n_frames=args.frames)
     except ValueError as exc:

@@ -21,45 +21,22 @@ and the command written to the PTZ unless it is inside the dead zone.
 `omnijax ptz-emulator`); without it commands are computed and logged only.
 Ctrl-C or SIGTERM: the PTZ goes home, the summary is written, nothing is lost.
 
-Writes DIR/summary.json (DESIGN.md section 7), DIR/log.jsonl (one line per frame)
+Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line per frame)
 and DIR/annotated.mp4 (the operator's view; --no-video to skip it).
 """
 
 
-def add_loop_options(p: argparse.ArgumentParser) -> None:
-    """Options shared by ``run`` and ``demo``."""
-    p.add_argument("--zoom-rule", choices=("calibrated", "paper"), default="calibrated",
-                   help="zoom rule that drives the PTZ (default calibrated; both are logged)")
-    p.add_argument("--tracker", choices=("kalman", "nearest"), default="kalman",
-                   help="kalman: constant velocity with optimal assignment (default); nearest: the paper's")
-    p.add_argument("--target", choices=("round-robin", "single"), default="round-robin",
-                   help="round-robin over people with a dwell time (default), or follow one person")
-    p.add_argument("--dwell", type=float, default=2.0, metavar="S", help="seconds on each face once reached (2)")
-    p.add_argument("--dead-zone", type=float, default=1.0, metavar="K",
-                   help="send a new pan/tilt only when it moves by more than K sigma (default 1)")
-    p.add_argument("--max-seconds", type=float, metavar="S", help="stop after S seconds")
-    p.add_argument("--max-frames", type=int, metavar="N", help="stop after N processed frames")
-    p.add_argument("--faults", default="", metavar="SPEC",
-                   help="inject faults, e.g. 'broken@300,wrong-size@350,end@900' (see --help of demo)")
-    p.add_argument("--no-video", action="store_true", help="do not draw or write the annotated video")
-    p.add_argument("--record", action="store_true",
-                   help="also write the omni frames as processed to DIR/omni.avi (to replay with `omnijax run`)")
-    p.add_argument("--quiet", action="store_true", help="no live status line")
-    p.add_argument("--cache-dir", metavar="DIR", default=None,
-                   help="JAX compilation cache (default: $XDG_CACHE_HOME/omnijax/xla or ~/.cache/omnijax/xla)")
-    p.add_argument("--no-cache", action="store_true", help="compile everything afresh, cache nothing")
-
-
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from runtime.cli._options import PACES, add_loop_options, add_ptz_profile_option
+
     p = sub.add_parser("run", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("source", metavar="SOURCE", help="camera index, video file or folder of images")
     p.add_argument("--config", required=True, metavar="FILE", help="rig TOML file")
     p.add_argument("--ptz", metavar="URL", help="PTZ serial port (pyserial URL); none: commands are only logged")
-    p.add_argument("--profile", metavar="P",
-                   help="PTZ device profile: TOML file or a name in configs/devices (default sony_evi_d70)")
+    add_ptz_profile_option(p, "PTZ device profile: TOML file or a name in configs/devices (default sony_evi_d70)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
-    p.add_argument("--pace", choices=("live", "all"),
+    p.add_argument("--pace", choices=PACES,
                    help="live: frames at the source's rate, late ones dropped; all: every frame as fast as "
                         "possible (default: live for cameras and videos, all for image folders)")
     p.add_argument("--fps", type=float, metavar="F", help="frame rate of an image folder")
@@ -72,47 +49,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def check_loop_options(args) -> None:
-    """Check the shared options, and turn on the compilation cache (later starts compile less)."""
-    from runtime.cli.optimise import _enable_cache
-    from runtime.errors import UsageError
-
-    if args.dwell < 0:
-        raise UsageError(f"--dwell: expected seconds >= 0, got {args.dwell}")
-    if not args.dead_zone >= 0:
-        raise UsageError(f"--dead-zone: expected a number of sigmas >= 0, got {args.dead_zone}")
-    if args.max_seconds is not None and not args.max_seconds > 0:
-        raise UsageError(f"--max-seconds: expected seconds > 0, got {args.max_seconds}")
-    if args.max_frames is not None and args.max_frames < 1:
-        raise UsageError(f"--max-frames: expected a positive count, got {args.max_frames}")
-    _enable_cache(args)
-
-
-def parse_faults(text: str, ptz_unplug: bool = True):
-    from runtime.errors import UsageError
-    from runtime.realtime.faults import FaultPlan
-
-    try:
-        plan = FaultPlan.parse(text)
-    except ValueError as exc:
-        raise UsageError(f"--faults: {exc}") from None
-    if plan.ptz_unplug and not ptz_unplug:
-        raise UsageError("--faults: ptz-unplug needs the emulated PTZ of `omnijax demo` (unplug a real one by hand)")
-    return plan
-
-
-def loop_config(args):
-    from runtime.realtime.loop import LoopConfig
-
-    return LoopConfig(zoom_rule=args.zoom_rule, tracker=args.tracker, target=args.target, dwell_s=args.dwell,
-                      dead_zone_sd=args.dead_zone, max_frames=args.max_frames, max_seconds=args.max_seconds,
-                      quiet=args.quiet)
-
-
 def run(args: argparse.Namespace) -> int:
+    from runtime.cli._options import load_ptz_profile, loop_config, parse_faults
     from runtime.errors import UsageError
 
-    check_loop_options(args)
+    config = loop_config(args)
     plan = parse_faults(args.faults, ptz_unplug=False)
     if args.fps is not None and not args.fps > 0:
         raise UsageError(f"--fps: expected frames per second > 0, got {args.fps}")
@@ -122,16 +63,13 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--background-step: expected a positive count, got {args.background_step}")
 
     from runtime.files import load_rig
-    from runtime.frames import SourceError
-    from runtime.ptz import ProfileError, PtzDriver, PtzError, load_profile
+    from runtime.frames import FolderSource, SourceError, open_source
+    from runtime.ptz import PtzDriver, PtzError
     from runtime.realtime.session import run_session
-    from runtime.realtime.sources import FaultySource, FolderSource, open_source
+    from runtime.realtime.sources import FaultySource
 
     rig = load_rig(args.config)
-    try:
-        profile = load_profile(args.profile or "sony_evi_d70")
-    except ProfileError as exc:
-        raise UsageError(str(exc)) from None
+    profile = load_ptz_profile(args.ptz_profile)
     try:
         source = open_source(args.source, args.fps)
     except SourceError as exc:
@@ -148,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
             source.close()
             raise UsageError(f"--ptz: {exc}") from None
     try:
-        summary = run_session(rig, source, Path(args.out), driver=driver, profile=profile, config=loop_config(args),
+        summary = run_session(rig, source, Path(args.out), driver=driver, profile=profile, config=config,
                               paced=pace == "live", background_frames=args.background_frames,
                               background_step=args.background_step,
                               video=not args.no_video, record=args.record, title=f"OMNI  {Path(str(args.source)).name}",

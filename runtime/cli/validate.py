@@ -37,14 +37,17 @@ from the PTZ's foot; per_quantity says where each worst case is.
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from runtime.cli._options import deprecated_alias
+
     p = sub.add_parser("validate", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", required=True, metavar="FILE", help="rig TOML file")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
     p.add_argument("--quick", action="store_true",
                    help="coarser grids and fewer Monte Carlo trials (CI-sized, under a minute)")
-    p.add_argument("--grid-step", type=float, metavar="PX",
-                   help="floor grid spacing in omni-image pixels (default: image width / 80; --quick / 40)")
+    deprecated_alias(p, "--grid-step", p.add_argument(
+        "--grid-step-px", type=float, metavar="PX",
+        help="floor grid spacing in omni-image pixels (default: image width / 80; --quick / 40)"))
     p.add_argument("--min-distance", type=float, default=1.0, metavar="M",
                    help="compare with Monte Carlo only this far from the PTZ's foot (default 1 m)")
     p.add_argument("--rel-tol", type=float, metavar="REL",
@@ -55,9 +58,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="frames per position with a fresh rig and person each (default 500; --quick 24)")
     p.add_argument("--empty-frames", type=int, metavar="N",
                    help="empty frames for the false-alarm rate (default 500; --quick 40)")
-    p.add_argument("--scenario", metavar="FILE",
-                   help="scenario TOML for the rendered frames (its room, lamps, furniture, sensor; the rig is "
-                        "--config's); default: a plain room on the rig's outline")
+    p.add_argument("--scenario", metavar="S",
+                   help="scenario TOML, or a name in configs/scenarios, for the rendered frames (its room, lamps, "
+                        "furniture, sensor; the rig is --config's); default: a plain room on the rig's outline")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.set_defaults(func=run)
 
@@ -76,12 +79,14 @@ def _counts(args) -> tuple[int, int, int]:
 
 def _scenario(args, rig):
     from omnijax.world import parse_scenario
+    from runtime.cli._options import scenario_file
     from runtime.files import read_toml
     from runtime.validation.endtoend import table1_scenario
 
     if args.scenario is None:
         return table1_scenario(rig, args.seed), "a plain room on the rig's floor outline"
-    return parse_scenario(read_toml(args.scenario), rig, source=str(args.scenario)), str(args.scenario)
+    path = scenario_file(args.scenario)
+    return parse_scenario(read_toml(path, "scenario file"), rig, source=str(path)), str(path)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -99,10 +104,10 @@ def run(args: argparse.Namespace) -> int:
 
     rig = load_rig(args.config)
     width = rig.omni.image_size[0]
-    step = args.grid_step or width / (40 if args.quick else 80)
+    step = args.grid_step_px or width / (40 if args.quick else 80)
     rel_tol = args.rel_tol or (0.03 if args.quick else 0.01)
     if not step > 0:
-        raise UsageError(f"--grid-step: expected a positive number of pixels, got {step}")
+        raise UsageError(f"--grid-step-px: expected a positive number of pixels, got {step}")
     if not 0 < rel_tol < 1:
         raise UsageError(f"--rel-tol: expected a number in (0, 1), got {rel_tol}")
     if not args.min_distance >= 0:

@@ -18,22 +18,31 @@ The JSON object has pan, tilt (rad), distance_m (D_p), radius_m (R_p),
 var {sin_pan, tan_tilt, pan, tilt, cov_pan_tilt}, fov {h, v} (rad), zoom,
 camera_model, valid, and inputs {name: {mean, sigma}} (px, rad, m): the exact
 numbers the result was computed from.
+
+--sigma-theta-deg replaces --sigma-theta, which gave the sigma in radians (the
+name the original command contract uses): --sigma-theta RAD still works, in
+radians, for one release, and says so on stderr.
 """
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from runtime.cli._options import deprecated_alias
+    from runtime.settings import Names
+
     p = sub.add_parser("variance", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", required=True, metavar="FILE", help="rig TOML file")
     p.add_argument("--foot", nargs=2, type=float, required=True, metavar=("R_F", "THETA_F"),
                    help="foot image radius (px from the image centre) and azimuth (rad)")
-    p.add_argument("--method", default="autodiff",
-                   choices=("autodiff", "analytic", "montecarlo", "second_order"))
+    p.add_argument("--method", default="autodiff", choices=Names("omnijax.uncertainty:METHODS"), metavar="M",
+                   help="%(choices)s (default autodiff)")
     p.add_argument("--sigma-rf", type=float, metavar="PX",
                    help="sigma of r_f in px (default: [detection] sigma_r_f)")
-    p.add_argument("--sigma-theta", type=float, metavar="RAD",
-                   help="sigma of theta_f in rad (default: [detection] sigma_theta_f_deg)")
-    p.add_argument("--rel-tol", type=float, default=0.005,
+    deprecated_alias(p, "--sigma-theta", p.add_argument(
+        "--sigma-theta-deg", type=float, metavar="DEG",
+        help="sigma of theta_f in degrees (default: [detection] sigma_theta_f_deg)"),
+        dest="sigma_theta_rad", note=" (which takes degrees; --sigma-theta is in radians)")
+    p.add_argument("--rel-tol", type=float, default=0.005, metavar="REL",
                    help="montecarlo: relative tolerance of the variances (95%%), default 0.005")
     p.add_argument("--seed", type=int, default=0, help="montecarlo: random seed (default 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -42,7 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def variance_report(rig, r_f: float, theta_f: float, method: str, sigma_r_f=None, sigma_theta_f=None,
                     rel_tol: float = 0.005, seed: int = 0) -> dict:
-    """The ``omnijax variance`` JSON object (DESIGN.md section 7) for one foot position."""
+    """The ``omnijax variance`` JSON object (docs/design.md section 7.3) for one foot position."""
     import jax
 
     from omnijax import INPUT_NAMES, aim, aim_with_covariance, pointing_covariance_mc
@@ -118,15 +127,20 @@ def run(args: argparse.Namespace) -> int:
     from runtime.files import load_rig
     from runtime.output import dumps
 
-    for flag, value in (("--sigma-rf", args.sigma_rf), ("--sigma-theta", args.sigma_theta)):
+    sigma_theta_rad = getattr(args, "sigma_theta_rad", None)
+    if sigma_theta_rad is not None and args.sigma_theta_deg is not None:
+        raise UsageError("--sigma-theta: give --sigma-theta-deg only (--sigma-theta is its old spelling, in radians)")
+    for flag, value in (("--sigma-rf", args.sigma_rf), ("--sigma-theta-deg", args.sigma_theta_deg),
+                        ("--sigma-theta", sigma_theta_rad)):
         if value is not None and not (value >= 0 and math.isfinite(value)):
             raise UsageError(f"{flag}: expected a finite sigma >= 0, got {value}")
+    sigma_theta = math.radians(args.sigma_theta_deg) if args.sigma_theta_deg is not None else sigma_theta_rad
     if not all(math.isfinite(v) for v in args.foot) or args.foot[0] < 0:
         raise UsageError(f"--foot: expected R_F >= 0 (px) and a finite THETA_F (rad), got {args.foot}")
     if not 0 < args.rel_tol < 1:
         raise UsageError(f"--rel-tol: expected a number in (0, 1), got {args.rel_tol}")
     rig = load_rig(args.config)
-    rep = variance_report(rig, args.foot[0], args.foot[1], args.method, args.sigma_rf, args.sigma_theta,
+    rep = variance_report(rig, args.foot[0], args.foot[1], args.method, args.sigma_rf, sigma_theta,
                           args.rel_tol, args.seed)
     print(dumps(rep) if args.json else _table(rep))
     return 0

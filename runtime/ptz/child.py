@@ -39,7 +39,7 @@ class EmulatorProcess:
         cmd = [sys.executable, "-m", "runtime.cli", "ptz-emulator", "--protocol", self.protocol,
                "--link", str(self.link), "--state-file", str(self.state_file)]
         if self.profile:
-            cmd += ["--profile", self.profile]
+            cmd += ["--ptz-profile", self.profile]
         with self._lock:
             self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                                          cwd=Path(__file__).resolve().parents[2])

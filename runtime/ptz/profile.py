@@ -4,7 +4,7 @@ A profile holds the protocol and line settings, the pan/tilt ranges in the
 device's own degrees and its units per degree, the speeds, the zoom lens's
 position for each magnification, the link's timing, and the *mounting*: how
 omnijax's pan/tilt (geometry frame: pan measured at the PTZ from the direction
-of the omni camera's axis, tilt up positive, radians; DESIGN.md eq 4) map to
+of the omni camera's axis, tilt up positive, radians; docs/design.md section 4.2) map to
 the device's angles. :meth:`DeviceProfile.to_device` and
 :meth:`DeviceProfile.from_device` are the only places where angles and zoom
 factors become device units and back; every target is clamped to the limits.
@@ -16,20 +16,22 @@ every failure is a one-line :class:`ProfileError` naming the file and key.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 import numpy as np
-import pydantic
 from annotated_types import Len
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
-from omnijax.config._config import _one_line
+from omnijax.config import Pos, Section, validate
+from runtime.files import read_toml
 
 #: Where the shipped profiles live (``configs/devices`` of the checkout).
 DEVICES_DIR = Path(__file__).resolve().parents[2] / "configs" / "devices"
+#: The serial protocols a profile can name (``--protocol``).
+Protocol = Literal["visca", "pelco-d"]
+PROTOCOLS: tuple[str, ...] = get_args(Protocol)
 #: The profile each protocol uses when none is given.
 DEFAULT_PROFILES = {"visca": "sony_evi_d70", "pelco-d": "pelco_d_dome"}
 #: Largest magnitude of a VISCA pan/tilt position (signed 16-bit nibbles) and of any zoom position.
@@ -42,16 +44,11 @@ class ProfileError(ValueError):
     """A device profile that cannot be used (one line: file, key, what was expected)."""
 
 
-Pos = Annotated[float, Field(gt=0)]
 Range = Annotated[list[float], Len(2, 2)]
 Direction = Literal[-1, 1]
 
 
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
-
-
-class AxisSection(_Section):
+class AxisSection(Section):
     """One rotation axis in the device's own degrees."""
 
     limits_deg: Range = Field(description="lowest and highest reachable angle, device degrees")
@@ -78,7 +75,7 @@ class AxisSection(_Section):
         return self.max_speed_deg_s * speed / self.max_speed
 
 
-class ZoomSection(_Section):
+class ZoomSection(Section):
     """The lens: device zoom position at each magnification (interpolated linearly between rows)."""
 
     magnification: Annotated[list[Annotated[float, Field(ge=1)]], Len(2)]
@@ -96,7 +93,7 @@ class ZoomSection(_Section):
         return self
 
 
-class MountingSection(_Section):
+class MountingSection(Section):
     """How the geometry's pan/tilt map to the device's: ``device = direction * geometry + zero``."""
 
     pan_zero_deg: float = Field(0.0, description="device pan when the PTZ looks toward the omni camera's axis")
@@ -105,7 +102,7 @@ class MountingSection(_Section):
     tilt_direction: Direction = Field(1, description="+1: device tilt grows upward; -1: downward")
 
 
-class LinkSection(_Section):
+class LinkSection(Section):
     """Timing of the serial link (seconds)."""
 
     ack_timeout_s: Pos = 0.5
@@ -122,7 +119,7 @@ class LinkSection(_Section):
         return self
 
 
-class PelcoDSection(_Section):
+class PelcoDSection(Section):
     """Pelco-D options."""
 
     general_response: bool = Field(True, description="the device answers each command with a general response")
@@ -159,11 +156,11 @@ class PtzPosition:
         return math.degrees(self.tilt)
 
 
-class DeviceProfile(_Section):
+class DeviceProfile(Section):
     """A validated device profile; see ``configs/devices/sony_evi_d70.toml`` for every key."""
 
     name: str
-    protocol: Literal["visca", "pelco-d"]
+    protocol: Protocol
     address: Annotated[int, Field(ge=1, le=255)]
     baudrate: Annotated[int, Field(gt=0)] = 9600
     pan: AxisSection
@@ -272,10 +269,7 @@ class DeviceProfile(_Section):
 
 def parse_profile(mapping: dict, source: str = "<profile>") -> DeviceProfile:
     """Validate a profile mapping (as read from TOML); one-line :class:`ProfileError` if it is wrong."""
-    try:
-        return DeviceProfile.model_validate(mapping)
-    except pydantic.ValidationError as exc:
-        raise ProfileError(_one_line(exc, source)) from None
+    return validate(DeviceProfile, mapping, source, ProfileError)
 
 
 def resolve_profile_path(name_or_path: str | Path) -> Path:
@@ -289,16 +283,7 @@ def resolve_profile_path(name_or_path: str | Path) -> Path:
 def load_profile(name_or_path: str | Path) -> DeviceProfile:
     """Read and validate a profile (see :func:`resolve_profile_path`)."""
     path = resolve_profile_path(name_or_path)
-    try:
-        with path.open("rb") as fh:
-            mapping = tomllib.load(fh)
-    except FileNotFoundError:
-        raise ProfileError(f"{path}: no such device profile") from None
-    except IsADirectoryError:
-        raise ProfileError(f"{path}: is a directory, expected a device profile (TOML)") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ProfileError(f"{path}: not valid TOML: {exc}") from None
-    return parse_profile(mapping, source=str(path))
+    return parse_profile(read_toml(path, "device profile", ProfileError), source=str(path))
 
 
 def default_profile(protocol: str) -> DeviceProfile:

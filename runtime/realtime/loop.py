@@ -46,7 +46,9 @@ from omnijax import (
     pointing_covariance_full,
     sector_mask,
 )
-from omnijax.geometry import floor_measurement, image_position
+from omnijax.geometry import floor_measurement, image_position, wrap_pi
+from omnijax.zoom import ZOOM_RULES as RULES
+from runtime.realtime.config import LoopConfig
 from runtime.realtime.sources import Capture, Frame
 from runtime.realtime.targeting import TargetSelector, outside_dead_zone
 from runtime.realtime.tracker import Tracker
@@ -69,9 +71,6 @@ class Aimed(eqx.Module):
     r_f: jax.Array
     theta_f: jax.Array
     cov_rt: jax.Array
-
-
-RULES = ("paper", "calibrated")
 
 
 @jax.jit
@@ -133,23 +132,6 @@ class Command:
     t_predicted: float
     aimed: Aimed | None = None
     floor_sd: np.ndarray | None = None  # sd of the predicted floor position (X, Y), m
-
-
-@dataclass
-class LoopConfig:
-    """Settings of :class:`RealTimeLoop` (command-line flags)."""
-
-    zoom_rule: str = "calibrated"
-    tracker: str = "kalman"
-    target: str = "round-robin"
-    dwell_s: float = 2.0
-    dead_zone_sd: float = 1.0
-    adapt_every: int = 2
-    home: tuple[float, float, float] = (0.0, 0.0, 1.0)
-    status_every_s: float = 0.5
-    max_frames: int | None = None
-    max_seconds: float | None = None
-    quiet: bool = False
 
 
 class Samples:
@@ -355,7 +337,7 @@ class RealTimeLoop:
         speed unless ``zoom`` is false)."""
         if self.profile is None or self.sent is None:
             return 0.0
-        d_pan = abs(math.degrees(math.remainder(target[0] - self.sent[0], 2 * math.pi)))
+        d_pan = abs(math.degrees(wrap_pi(target[0] - self.sent[0])))
         d_tilt = abs(math.degrees(target[1] - self.sent[1]))
         zp = self.profile.zoom
         z_span = max(zp.position) - min(zp.position)
@@ -459,7 +441,7 @@ class RealTimeLoop:
         sys.stderr.flush()
 
     def summary(self) -> dict:
-        """The ``summary.json`` object (DESIGN.md section 7), without the demo's scores."""
+        """The ``summary.json`` object (docs/design.md section 7.3), without the demo's scores."""
         frames = self.counts["frames"]
         ptz = {"commands": self.counts["commands_sent"], "errors": 0, "reconnects": 0}
         if self.driver is not None:

@@ -23,8 +23,10 @@ import numpy as np
 
 from omnijax import Rig, build_detector, learn_background
 from omnijax.detection import polar_range
+from runtime.frames import Source
 from runtime.output import dumps, staged_output
-from runtime.realtime.loop import LoopConfig, RealTimeLoop
+from runtime.realtime.config import LoopConfig
+from runtime.realtime.loop import RealTimeLoop
 from runtime.realtime.overlay import (
     GREEN,
     GREY,
@@ -37,7 +39,7 @@ from runtime.realtime.overlay import (
     draw_tracks,
     track_pixels,
 )
-from runtime.realtime.sources import Capture, Source
+from runtime.realtime.sources import Capture
 
 
 class VideoOut:

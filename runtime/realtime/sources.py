@@ -1,26 +1,25 @@
-"""Frame sources for the real-time loop, and a capture thread that keeps only the latest frame.
+"""The capture thread that keeps only the latest frame, and the loop's synthetic and faulty sources.
 
-Sources yield RGB uint8 frames; a :class:`Capture` runs one in its own thread and keeps only
-the newest frame with its time stamp (``time.monotonic()`` when it became available): the
-loop takes it when ready, frames it never took are counted as dropped, frames older than
-``max_age_s`` when taken are rejected as stale (not processed late). ``paced`` sources
-(video files, image folders and synthetic scenarios played "live") release frames at
-their frame rate like a camera; unpaced ones hand over every frame (offline processing).
+Sources (:mod:`runtime.frames`: video files, image folders, camera devices; here: a
+synthetic world, and a wrapper injecting faults) yield RGB uint8 frames; a :class:`Capture`
+runs one in its own thread and keeps only the newest frame with its time stamp
+(``time.monotonic()`` when it became available): the loop takes it when ready, frames it
+never took are counted as dropped, frames older than ``max_age_s`` when taken are rejected
+as stale (not processed late). ``paced`` sources (video files, image folders and synthetic
+scenarios played "live") release frames at their frame rate like a camera; unpaced ones
+hand over every frame (offline processing).
 """
 
 from __future__ import annotations
 
-import abc
 import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 
-import cv2
 import numpy as np
 
-from runtime.frames import IMAGE_SUFFIXES, SourceError
+from runtime.frames import Source
 
 
 @dataclass
@@ -37,114 +36,6 @@ class Frame:
     t: float
     image: np.ndarray | None
     stamp: float = 0.0
-
-
-class Source(abc.ABC):
-    """A stream of frames. ``fps`` is the nominal rate (``None``: as fast as read)."""
-
-    fps: float | None = None
-    name: str = "source"
-    #: Live sources (cameras) stamp frames with the capture clock, others with index / fps.
-    live: bool = False
-
-    @abc.abstractmethod
-    def frames(self) -> Iterator[np.ndarray | None]:
-        """RGB uint8 frames in order; ``None`` for a frame that could not be read."""
-
-    def close(self) -> None:
-        """Release the device or file (nothing to release unless a source says otherwise)."""
-        return None
-
-
-class VideoSource(Source):
-    """A video file (OpenCV); an undecodable frame is yielded as ``None`` and reading goes on."""
-
-    def __init__(self, path: str | Path, max_broken: int = 25):
-        self.path = Path(path)
-        if not self.path.is_file():
-            raise SourceError(f"{self.path}: no such video file")
-        self._cap = cv2.VideoCapture(str(self.path))
-        if not self._cap.isOpened():
-            raise SourceError(f"{self.path}: not a video OpenCV can open")
-        fps = self._cap.get(cv2.CAP_PROP_FPS)
-        self.fps = fps if fps and np.isfinite(fps) and fps > 0 else None
-        self.name = str(self.path)
-        self.max_broken = max_broken
-
-    def frames(self):
-        broken = 0
-        total = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
-        n = 0
-        while True:
-            ok, img = self._cap.read()
-            n += 1
-            if ok and img is not None:
-                broken = 0
-                yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-                continue
-            if total and n < total and broken < self.max_broken:
-                broken += 1
-                yield None
-                continue
-            return
-
-    def close(self):
-        self._cap.release()
-
-
-class FolderSource(Source):
-    """A folder of images, in name order; an unreadable image is yielded as ``None``."""
-
-    def __init__(self, path: str | Path, fps: float | None = None):
-        self.path = Path(path)
-        self.files = sorted(p for p in self.path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
-        if not self.files:
-            raise SourceError(f"{self.path}: no images ({', '.join(sorted(IMAGE_SUFFIXES))}) in this folder")
-        self.fps, self.name = fps, str(self.path)
-
-    def frames(self):
-        for p in self.files:
-            img = cv2.imread(str(p), cv2.IMREAD_COLOR)
-            yield None if img is None else cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-
-
-class DeviceSource(Source):
-    """A camera device by index (OpenCV); a failed grab is yielded as ``None``."""
-
-    def __init__(self, index: int, max_broken: int = 50):
-        self._cap = cv2.VideoCapture(index)
-        if not self._cap.isOpened():
-            raise SourceError(f"camera {index}: cannot open the device")
-        fps = self._cap.get(cv2.CAP_PROP_FPS)
-        self.fps = fps if fps and fps > 0 else None
-        self.name, self.max_broken = f"camera {index}", max_broken
-        self.live = True
-
-    def frames(self):
-        broken = 0
-        while broken < self.max_broken:
-            ok, img = self._cap.read()
-            if ok and img is not None:
-                broken = 0
-                yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-            else:
-                broken += 1
-                yield None
-
-    def close(self):
-        self._cap.release()
-
-
-def open_source(spec: str, fps: float | None = None) -> Source:
-    """A source from a command-line spec: a video file, an image folder, or a camera index."""
-    if spec.isdigit():
-        return DeviceSource(int(spec))
-    path = Path(spec)
-    if path.is_dir():
-        return FolderSource(path, fps)
-    if path.exists():
-        return VideoSource(path)
-    raise SourceError(f"{spec}: no such video file, image folder or camera index")
 
 
 class Capture:

@@ -12,15 +12,19 @@ from __future__ import annotations
 
 import math
 
+from omnijax.geometry import wrap_pi
 from runtime.realtime.tracker import Track
+
+#: How the target is chosen (``LoopConfig.target``, ``--target``).
+TARGET_MODES: tuple[str, ...] = ("round-robin", "single")
 
 
 class TargetSelector:
     """Chooses the target track (see the module docstring)."""
 
     def __init__(self, mode: str = "round-robin", dwell_s: float = 2.0):
-        if mode not in ("round-robin", "single"):
-            raise ValueError(f"target mode must be 'round-robin' or 'single', got {mode!r}")
+        if mode not in TARGET_MODES:
+            raise ValueError(f"target mode must be one of {TARGET_MODES}, got {mode!r}")
         self.mode, self.dwell_s = mode, dwell_s
         self.current: int | None = None
         self.settled_at: float | None = None
@@ -55,6 +59,6 @@ def outside_dead_zone(new: tuple[float, float, float], sent: tuple[float, float,
     """Whether ``new`` (pan, tilt rad, zoom) differs from the ``sent`` command enough to send it."""
     if sent is None:
         return True
-    d_pan = abs(math.remainder(new[0] - sent[0], 2 * math.pi))
+    d_pan = abs(wrap_pi(new[0] - sent[0]))
     return (d_pan > k * sd_pan or abs(new[1] - sent[1]) > k * sd_tilt
             or abs(math.log(new[2] / sent[2])) > zoom_rel)

@@ -56,6 +56,8 @@ def constant_velocity(dt: float, accel_sd: float) -> tuple[np.ndarray, np.ndarra
 
 
 H = np.hstack([np.eye(2), np.zeros((2, 2))])
+#: The trackers (``LoopConfig.tracker``, ``--tracker``): constant-velocity Kalman, or the paper's nearest neighbour.
+TRACKERS: tuple[str, ...] = ("kalman", "nearest")
 
 
 class Tracker:
@@ -67,8 +69,8 @@ class Tracker:
 
     def __init__(self, mode: str = "kalman", accel_sd: float = 1.5, speed_sd: float = 1.0,
                  confirm: int = 2, max_misses: int = 5, nearest_gate_m: float = 0.8):
-        if mode not in ("kalman", "nearest"):
-            raise ValueError(f"tracker mode must be 'kalman' or 'nearest', got {mode!r}")
+        if mode not in TRACKERS:
+            raise ValueError(f"tracker mode must be one of {TRACKERS}, got {mode!r}")
         self.mode, self.accel_sd, self.speed_sd = mode, accel_sd, speed_sd
         self.confirm, self.max_misses, self.nearest_gate_m = confirm, max_misses, nearest_gate_m
         self.tracks: list[Track] = []

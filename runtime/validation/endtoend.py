@@ -1,6 +1,6 @@
 """End-to-end characterisation on rendered frames: the paper's Table 1, detection rates, containment.
 
-DESIGN.md section 5. A person stands still at eight floor positions P1-P8 (different
+docs/design.md section 5. A person stands still at eight floor positions P1-P8 (different
 distances and directions from the PTZ) in the synthetic world; every trial renders
 an omni frame with fresh sensor noise and runs the detector on it.
 
@@ -46,6 +46,7 @@ from omnijax import (
     pointing_covariance,
 )
 from omnijax.detection import Background, Detections, Detector, LineBackground, line_change
+from omnijax.geometry import wrap_2pi, wrap_pi
 from omnijax.world import (
     Scenario,
     World,
@@ -58,10 +59,10 @@ from omnijax.world import (
     render_frame,
     walkable,
 )
+from omnijax.zoom import ZOOM_RULES as RULES
 
 #: Containment is measured at these p_contain, for both zoom rules.
 P_CONTAIN = (0.9, 0.95, 0.99)
-RULES = ("paper", "calibrated")
 #: Clearance (m) of the positions from walls and excluded zones, and their distance from the PTZ and the omni axis.
 CLEARANCE, NEAR_PTZ, NEAR_AXIS = 0.5, 1.0, 0.6
 
@@ -137,7 +138,7 @@ def table1_positions(rig: Rig, scenario: Scenario, n: int = 8) -> np.ndarray:
         raise ValueError(f"no walkable floor {CLEARANCE} m from the walls and {NEAR_PTZ} m from the PTZ: "
                          "the room is too small for Table 1's positions")
     towards_axis = math.atan2(-ptz[1], -ptz[0]) if np.hypot(*ptz) > 1e-9 else 0.0
-    rel = np.asarray(_angle(np.arctan2(grid[:, 1] - ptz[1], grid[:, 0] - ptz[0]) - towards_axis))
+    rel = np.asarray(wrap_pi(np.arctan2(grid[:, 1] - ptz[1], grid[:, 0] - ptz[0]) - towards_axis))
     lo, hi = np.percentile(rel, [2, 98])
     s = np.arange(NEAR_PTZ, np.hypot(x1 - x0, y1 - y0) + 1, 0.02)
     out = []
@@ -208,15 +209,11 @@ class Matched(eqx.Module):
     contrast: jax.Array
 
 
-def _angle(a):
-    return jnp.mod(a + jnp.pi, 2 * jnp.pi) - jnp.pi
-
-
 def match(dets: Detections, theta_true) -> tuple[Matched, jax.Array]:
     """The valid detection whose sector contains ``theta_true`` (nearest centre if several), and
     the number of other valid detections (false alarms)."""
-    half = 0.5 * jnp.mod(dets.theta_r - dets.theta_l, 2 * jnp.pi)
-    off = jnp.abs(_angle(dets.theta_f - theta_true))
+    half = 0.5 * wrap_2pi(dets.theta_r - dets.theta_l)
+    off = jnp.abs(wrap_pi(dets.theta_f - theta_true))
     covers = dets.valid & (off <= half + 1e-9)
     k = jnp.argmin(jnp.where(covers, off, jnp.inf))
     m = Matched(found=covers.any(), r_f=dets.r_f[k], theta_f=dets.theta_f[k], sigma_r_f=dets.sigma_r_f[k],
@@ -403,7 +400,7 @@ def table_row(rig: Rig, name: str, foot, t: Trials, detection_only: bool) -> dic
     mask = jnp.asarray(DETECTION_ONLY if detection_only else np.ones(9))
     sp, tt, vsp, vtt = (np.asarray(a) for a in _pointing_stats(rig, *map(jnp.asarray, (r_f, th, s_r, s_th)), mask))
     true_sp, true_tt = _true_pointing(rig.omni.profile, x_true)
-    e_r, e_th = r_f - x_true[:, 0], _angle(th - x_true[:, 1])
+    e_r, e_th = r_f - x_true[:, 0], wrap_pi(th - x_true[:, 1])
     if detection_only:  # the trial-to-trial spread of the detection
         alt_r, alt_th = np.full_like(r_f, np.std(r_f, ddof=1)), np.full_like(th, np.std(np.asarray(e_th), ddof=1))
     else:  # its error about the truth, bias included

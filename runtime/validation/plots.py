@@ -12,6 +12,7 @@ import numpy as np
 from matplotlib.colors import SymLogNorm
 
 from omnijax import Rig, world_to_image
+from omnijax.uncertainty import METHODS
 
 from .theory import PtzMaps
 
@@ -86,7 +87,7 @@ def ptz_figure(maps: PtzMaps, rig: Rig, quantity: str, path: Path, min_distance:
     fig, axes = plt.subplots(2, 4, figsize=(19, 8.6), constrained_layout=True)
     ref = np.log10(v["montecarlo"][quantity][region & (v["montecarlo"][quantity] > 0)])
     lo, hi = np.percentile(ref, [1, 99.5]) if ref.size else (None, None)
-    for ax, method in zip(axes[0], ("autodiff", "analytic", "second_order", "montecarlo")):
+    for ax, method in zip(axes[0], METHODS):
         var = v[method][quantity]
         img = np.where(region & (var > 0), np.log10(np.where(var > 0, var, 1.0)), np.nan)
         im = ax.imshow(img, extent=ext, cmap="viridis", vmin=lo, vmax=hi)

@@ -31,7 +31,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from omnijax.world import head_in_view
-from runtime.realtime.loop import RULES
+from omnijax.zoom import ZOOM_RULES as RULES
 
 #: Trials scored at once (one compiled shape); face widths are histogrammed in 1 px bins up to FACE_MAX.
 BATCH, FACE_MAX = 256, 4096

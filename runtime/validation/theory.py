@@ -25,6 +25,7 @@ from omnijax import (
     pointing_covariance,
     pointing_covariance_mc,
 )
+from omnijax.uncertainty import PROPAGATION_METHODS
 
 Progress = Callable[[str, float], None]
 
@@ -143,7 +144,7 @@ def ptz_check(rig: Rig, *, step_px: float = 8.0, min_distance: float = 1.0, rel_
     distance = np.asarray(p.distance)
     maps = PtzMaps(x=xs, y=ys, region=region, compared=region & (distance >= min_distance), distance=distance)
 
-    for method in ("autodiff", "analytic", "second_order"):
+    for method in PROPAGATION_METHODS:
         if progress:
             progress(method, 0.0)
         maps.var[method] = _variances(pointing_covariance(x, sigma, omni.profile, method))

@@ -1,6 +1,6 @@
 """The synthetic world's records on disk: one truth line per frame, and the world's summary.
 
-``truth.jsonl`` keeps DESIGN.md section 7's contract: ``frame`` and ``persons`` [{``id``,
+``truth.jsonl`` keeps docs/design.md section 7.3's contract: ``frame`` and ``persons`` [{``id``,
 ``foot_m`` [x, y], ``head_m`` [x, y, z], ``r_f``, ``theta_f``}], with more keys per person
 and per frame; ``world.json`` holds what does not change from frame to frame (the true rig,
 the people's sizes and colours, the sensor).

@@ -176,7 +176,7 @@ def test_eq_13_is_first_order_plus_its_product_term(paper_rig):
 
 
 def test_eq_14_overstates_sin_pan_where_R_p_and_D_p_correlate(paper_rig):
-    """DESIGN.md: at R_p = 4 m, vartheta = 45 deg eq 14 is several times Monte Carlo's variance."""
+    """docs/design.md section 4.10: at R_p = 4 m, vartheta = 45 deg eq 14 is several times Monte Carlo's variance."""
     from omnijax import world_to_image
 
     rig = paper_rig

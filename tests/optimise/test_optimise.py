@@ -1,5 +1,5 @@
 """Layout optimiser: objectives and their gradients, the box map, the search against its grid,
-the [layout] section, and `omnijax optimise`'s contract (DESIGN.md section 7)."""
+the [layout] section, and `omnijax optimise`'s contract (docs/design.md section 7.3)."""
 
 from __future__ import annotations
 
@@ -164,7 +164,7 @@ def test_default_bounds_come_from_the_room_and_the_heights(paper_rig, fisheye_ri
 
 def test_search_matches_its_grid_and_reports_the_bound():
     """Mean variance in the paper's room: the optimum sits on D_c's upper bound (the wall), as the
-    paper's section 6 and DESIGN.md expect; the optimiser is within 0.5 % of the grid's best."""
+    paper's section 6 and docs/design.md section 4.14 expect; the optimiser is within 0.5 % of the grid's best."""
     rig = _rig(objective="variance", grid_step=0.5, landscape=7, starts=2)
     result = search(rig, floor_grid(rig.room, 0.5))
     assert result.on_bound.get("D_c") == "upper"
@@ -225,7 +225,7 @@ def test_shipped_rigs_load(name):
 
 def test_optimise_writes_the_contract_and_maps(tmp_path, capsys):
     out = tmp_path / "opt"
-    code = main(["optimise", "--config", PAPER, "--out", str(out), "--grid-step", "0.6", "--landscape", "5",
+    code = main(["optimise", "--config", PAPER, "--out", str(out), "--grid-step-m", "0.6", "--landscape", "5",
                  "--starts", "2", "--no-cache"])
     assert code == 0, capsys.readouterr().err
     rep = json.loads((out / "layout.json").read_text())
@@ -244,7 +244,7 @@ def test_optimise_writes_the_contract_and_maps(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("args,expect", [
-    (["--grid-step", "-1"], "layout.grid_step"),
+    (["--grid-step-m", "-1"], "layout.grid_step"),
     (["--vary", "H_o"], "H_o bounds"),
     (["--starts", "0"], "layout.starts"),
 ])

@@ -151,7 +151,7 @@ def test_rim_fit_on_a_disc_leaving_the_frame():
 @pytest.mark.realdata
 def test_rim_fit_on_the_real_catadioptric_image():
     """The mirror's bright disc: its centre lies near the OCamCalib centre, its rim near the file's
-    ROI max (600 px); both are measured (see the README: 8.8 px and -6.5 px)."""
+    ROI max (600 px); both are measured (see docs/calibration.md: 8.8 px and -6.5 px)."""
     img = cv2.imread(str(shared_data("catadioptric_office", "example.jpg")), cv2.IMREAD_GRAYSCALE)
     file_center = np.array([674.318875 + 300, 545.872616])
     fit, _ = fit_rim(img.astype(np.float32), tuple(file_center), 600.0)

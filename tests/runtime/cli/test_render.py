@@ -1,4 +1,4 @@
-"""``omnijax render``: DESIGN.md section 7's contract (video + truth.jsonl), staged output, bad input."""
+"""``omnijax render``: docs/design.md section 7.3's contract (video + truth.jsonl), staged output, bad input."""
 
 from __future__ import annotations
 
@@ -63,7 +63,7 @@ def test_render_bad_arguments_exit_2(tmp_path, capsys, args, expect):
 def test_render_missing_scenario_or_out_on_a_file_exits_2(tmp_path, capsys):
     code = main(["render", "--scenario", str(tmp_path / "none.toml"), "--frames", "2", "--out", str(tmp_path / "r")])
     err = capsys.readouterr().err
-    assert code == 2 and "no such config file" in err and err.count("\n") == 1
+    assert code == 2 and "no such scenario file" in err and err.count("\n") == 1
     blocker = tmp_path / "file"
     blocker.write_text("")
     code = main(["render", "--scenario", SIX, "--frames", "2", "--out", str(blocker / "r")])

@@ -1,4 +1,4 @@
-"""The command line: `omnijax variance` and `omnijax validate` keep DESIGN.md section 7's contracts."""
+"""The command line: `omnijax variance` and `omnijax validate` keep docs/design.md section 7.3's contracts."""
 
 from __future__ import annotations
 
@@ -40,10 +40,10 @@ def test_variance_contract(capsys, method):
 
 
 def test_variance_sigma_overrides_are_echoed(capsys):
-    rep = _variance(capsys, "--foot", "100", "0.7", "--sigma-rf", "2.5", "--sigma-theta", "0.01")
-    assert rep["inputs"]["r_f"]["sigma"] == 2.5 and rep["inputs"]["theta_f"]["sigma"] == 0.01
+    rep = _variance(capsys, "--foot", "100", "0.7", "--sigma-rf", "2.5", "--sigma-theta-deg", "0.5")
+    assert rep["inputs"]["r_f"]["sigma"] == 2.5 and rep["inputs"]["theta_f"]["sigma"] == math.radians(0.5)
     base = _variance(capsys, "--foot", "100", "0.7")
-    assert rep["var"]["pan"] > base["var"]["pan"] * 0.3  # theta sigma 0.57 deg vs 1 deg: smaller, not zero
+    assert rep["var"]["pan"] > base["var"]["pan"] * 0.3  # theta sigma 0.5 deg vs 1 deg: smaller, not zero
 
 
 def test_variance_flags_degenerate_geometry(capsys):
@@ -79,7 +79,7 @@ def test_validate_quick_writes_report_and_maps(tmp_path):
     # as a user runs it: a separate process (the world's renderer is type-checked by its own tests)
     out = tmp_path / "val"
     run = subprocess.run([sys.executable, "-m", "runtime.cli", "validate", "--config", PAPER, "--out", str(out),
-                          "--quick", "--grid-step", "24", "--trials", "8", "--fresh-trials", "8",
+                          "--quick", "--grid-step-px", "24", "--trials", "8", "--fresh-trials", "8",
                           "--empty-frames", "8"], capture_output=True, text=True, cwd=ROOT, timeout=900)
     assert run.returncode == 0, run.stderr[-2000:]
     assert "containment:" in run.stdout

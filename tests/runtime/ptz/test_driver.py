@@ -227,7 +227,7 @@ def test_ptz_command_sends_a_target_and_reports_the_position(capsys):
 
     profile = quick_profile("pelco-d")
     with PtyEmulator(profile) as emu:
-        code = main(["ptz", "--port", emu.path, "--protocol", "pelco-d", "--pan-deg", "-45", "--tilt-deg", "-30",
+        code = main(["ptz", "--ptz", emu.path, "--protocol", "pelco-d", "--pan-deg", "-45", "--tilt-deg", "-30",
                      "--zoom", "8", "--json"])
         out, err = capsys.readouterr()
         assert code == 0, err
@@ -240,10 +240,10 @@ def test_ptz_command_sends_a_target_and_reports_the_position(capsys):
 
 
 @pytest.mark.parametrize("args,code,expect", [
-    (["--port", "loop://", "--pan-deg", "10"], 2, "give all three"),
-    (["--port", "loop://", "--profile", "nowhere"], 2, "no such device profile"),
-    (["--port", "/nonexistent/ttyUSB0", "--timeout", "0.5"], 1, "no visca camera within"),
-    (["--port", "loop://", "--wait", "0"], 2, "--wait: expected a positive"),
+    (["--ptz", "loop://", "--pan-deg", "10"], 2, "give all three"),
+    (["--ptz", "loop://", "--ptz-profile", "nowhere"], 2, "no such device profile"),
+    (["--ptz", "/nonexistent/ttyUSB0", "--timeout", "0.5"], 1, "no visca camera within"),
+    (["--ptz", "loop://", "--wait", "0"], 2, "--wait: expected a positive"),
 ])
 def test_ptz_command_errors(args, code, expect):
     proc = subprocess.run([OMNIJAX, "ptz", *args], cwd=ROOT, capture_output=True, text=True, timeout=60)

@@ -168,7 +168,7 @@ def test_pelco_without_general_responses():
 
 
 # ------------------------------------------------------------------------------------------
-# The command (DESIGN.md section 7)
+# The command (docs/design.md section 7.4)
 # ------------------------------------------------------------------------------------------
 
 
@@ -203,8 +203,8 @@ def test_emulator_command_contract(tmp_path, protocol):
 
 @pytest.mark.parametrize("args,expect", [
     (["--protocol", "visca", "--address", "9"], "--address: expected 1-7"),
-    (["--protocol", "pelco-d", "--profile", "sony_evi_d70"], "is a visca profile"),
-    (["--protocol", "visca", "--profile", "nowhere.toml"], "no such device profile"),
+    (["--protocol", "pelco-d", "--ptz-profile", "sony_evi_d70"], "is a visca profile"),
+    (["--protocol", "visca", "--ptz-profile", "nowhere.toml"], "no such device profile"),
     (["--protocol", "visca", "--faults", "fire=0.5"], "unknown fault 'fire'"),
     (["--protocol", "visca", "--faults", "drop=2"], "probability in [0, 1]"),
     (["--protocol", "visca", "--state-file", "/no/such/dir/s.json"], "no such directory"),

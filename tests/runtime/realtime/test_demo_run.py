@@ -20,9 +20,10 @@ import numpy as np
 import pytest
 
 from runtime.cli import main
+from runtime.frames import Source
 from runtime.realtime.faults import FaultPlan
 from runtime.realtime.loop import Samples
-from runtime.realtime.sources import Capture, FaultySource, Source
+from runtime.realtime.sources import Capture, FaultySource
 from tests.paths import ROOT
 
 PAPER = str(ROOT / "configs" / "paper.toml")

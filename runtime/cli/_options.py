@@ -1,0 +1,150 @@
+"""Options several commands share, each written once, and old flag spellings kept as hidden aliases.
+
+- the real-time loop's settings (:class:`runtime.realtime.config.LoopConfig`, turned into
+  flags by :mod:`runtime.settings`) and the session's (faults, video, recording, cache), for
+  ``run`` and ``demo``;
+- the PTZ device profile (``--ptz-profile``) and its one loading path;
+- :func:`deprecated_alias`: a flag renamed in this release still works, hidden from
+  ``--help``, and says once on stderr what it is called now.
+
+Nothing here imports JAX: building the parser stays quick.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from runtime.errors import UsageError
+from runtime.settings import Names
+
+#: ``--pace``: frames at the source's rate (late ones dropped), or every frame as fast as possible.
+PACES: tuple[str, ...] = ("live", "all")
+#: The PTZ protocols (``--protocol``) of the device profiles.
+PROTOCOLS = Names("runtime.ptz.profile:PROTOCOLS")
+
+
+class _Deprecated(argparse.Action):
+    """Stores like the option it stands for, after one line on stderr naming the new spelling."""
+
+    def __init__(self, option_strings, dest, new: str, note: str = "", **kwargs):
+        super().__init__(option_strings, dest, **kwargs)
+        self.new, self.note = new, note
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"{parser.prog}: {option_string} is deprecated, use {self.new}{self.note}", file=sys.stderr)
+        setattr(namespace, self.dest, values)
+
+
+def deprecated_alias(parser: argparse.ArgumentParser, old: str, new: argparse.Action, *,
+                     dest: str | None = None, type=None, note: str = "") -> None:
+    """Keep ``old`` working for one release as a hidden spelling of the option ``new``.
+
+    ``dest`` and ``type`` replace the new option's where the old one meant something else
+    (another unit); ``note`` is added to the deprecation line.
+    """
+    parser.add_argument(old, action=_Deprecated, new=new.option_strings[0], note=note, dest=dest or new.dest,
+                        type=type or new.type, nargs=new.nargs, metavar=new.metavar, choices=new.choices,
+                        default=argparse.SUPPRESS, help=argparse.SUPPRESS)
+
+
+def scenario_file(spec: str):
+    """``--scenario``: a scenario file or the name of one in configs/scenarios (one line naming the flag)."""
+    from omnijax.config import ConfigError
+    from runtime.files import scenario_path
+
+    try:
+        return scenario_path(spec)
+    except ConfigError as exc:
+        raise UsageError(f"--scenario: {exc}") from None
+
+
+# --------------------------------------------------------------------------------------
+# PTZ device profile
+# --------------------------------------------------------------------------------------
+
+
+def add_ptz_profile_option(parser: argparse.ArgumentParser, help: str, alias: bool = True) -> None:
+    """``--ptz-profile P`` (a TOML file or a name in configs/devices), and ``--profile`` as its old spelling."""
+    action = parser.add_argument("--ptz-profile", metavar="P", help=help)
+    if alias:
+        deprecated_alias(parser, "--profile", action)
+
+
+def load_ptz_profile(name: str | None, protocol: str | None = None):
+    """The device profile ``name`` (``--ptz-profile``), else the shipped one for ``protocol`` (visca if
+    ``None``); a profile of another protocol than one asked for is refused. One line naming the flag."""
+    from runtime.ptz import ProfileError, default_profile, load_profile
+
+    try:
+        profile = load_profile(name) if name else default_profile(protocol or "visca")
+    except ProfileError as exc:
+        raise UsageError(f"--ptz-profile: {exc}") from None
+    if protocol is not None and profile.protocol != protocol:
+        raise UsageError(f"--ptz-profile: {name} is a {profile.protocol} profile, not {protocol}")
+    return profile
+
+
+# --------------------------------------------------------------------------------------
+# The real-time loop (run, demo) and the compilation cache (run, demo, optimise)
+# --------------------------------------------------------------------------------------
+
+
+def add_cache_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--cache-dir", metavar="DIR", default=None,
+                        help="JAX compilation cache (default: $XDG_CACHE_HOME/omnijax/xla or ~/.cache/omnijax/xla)")
+    parser.add_argument("--no-cache", action="store_true", help="compile everything afresh, cache nothing")
+
+
+def enable_cache(args) -> str | None:
+    """Turn on JAX's persistent compilation cache (``--cache-dir``, unless ``--no-cache``); its path."""
+    import os
+    from pathlib import Path
+
+    import jax
+
+    if args.no_cache:
+        return None
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    path = Path(args.cache_dir) if args.cache_dir else base / "omnijax" / "xla"
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    return str(path)
+
+
+def add_loop_options(parser: argparse.ArgumentParser) -> None:
+    """The loop's settings (every :func:`~runtime.settings.setting` of ``LoopConfig``) and the session's."""
+    from runtime.realtime.config import LoopConfig
+    from runtime.settings import add_options
+
+    deprecated_alias(parser, "--dead-zone", add_options(parser, LoopConfig)["dead_zone_sd"])
+    parser.add_argument("--faults", default="", metavar="SPEC",
+                        help="inject faults, e.g. 'broken@300,wrong-size@350,end@900' (see --help of demo)")
+    parser.add_argument("--no-video", action="store_true", help="do not draw or write the annotated video")
+    parser.add_argument("--record", action="store_true",
+                        help="also write the omni frames as processed to DIR/omni.avi (to replay with `omnijax run`)")
+    add_cache_options(parser)
+
+
+def loop_config(args):
+    """The :class:`LoopConfig` of the parsed flags (one line naming a flag out of bounds), after turning on
+    the compilation cache (later starts compile less)."""
+    from runtime.realtime.config import LoopConfig
+    from runtime.settings import from_args
+
+    config = from_args(LoopConfig, args)
+    enable_cache(args)
+    return config
+
+
+def parse_faults(text: str, ptz_unplug: bool = True):
+    """``--faults`` as a :class:`~runtime.realtime.faults.FaultPlan` (``ptz-unplug`` only with an emulated PTZ)."""
+    from runtime.realtime.faults import FaultPlan
+
+    try:
+        plan = FaultPlan.parse(text)
+    except ValueError as exc:
+        raise UsageError(f"--faults: {exc}") from None
+    if plan.ptz_unplug and not ptz_unplug:
+        raise UsageError("--faults: ptz-unplug needs the emulated PTZ of `omnijax demo` (unplug a real one by hand)")
+    return plan

@@ -1,0 +1,38 @@
+"""The real-time loop's settings, written once: :class:`LoopConfig` is also the flags of ``run`` and ``demo``.
+
+Each field made by :func:`runtime.settings.setting` becomes a command-line option with its
+help, unit, allowed names and bounds (:func:`runtime.settings.add_options`); the same
+metadata checks a config built in code. This module imports nothing heavy, so that the
+command line can be built without JAX.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from runtime.settings import Names, check, setting
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    """Settings of :class:`~runtime.realtime.loop.RealTimeLoop` (fields without a flag are fixed here)."""
+
+    zoom_rule: str = setting("calibrated", "%(choices)s: the zoom rule that drives the PTZ (both are logged)",
+                             metavar="RULE", choices=Names("omnijax.zoom:ZOOM_RULES"))
+    tracker: str = setting("kalman", "%(choices)s: constant velocity with optimal assignment, or the paper's "
+                           "nearest neighbour", metavar="NAME", choices=Names("runtime.realtime.tracker:TRACKERS"))
+    target: str = setting("round-robin", "%(choices)s: over people with a dwell time, or follow one person",
+                          metavar="MODE", choices=Names("runtime.realtime.targeting:TARGET_MODES"))
+    dwell_s: float = setting(2.0, "seconds on each face once reached", unit="seconds", metavar="S", ge=0,
+                             flag="--dwell")
+    dead_zone_sd: float = setting(1.0, "send a new pan/tilt only when it moves by more than K standard deviations",
+                                  unit="a number of standard deviations", metavar="K", ge=0)
+    adapt_every: int = 2
+    home: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    status_every_s: float = 0.5
+    max_frames: int | None = setting(None, "stop after N processed frames", unit="frames", metavar="N", gt=0)
+    max_seconds: float | None = setting(None, "stop after S seconds", unit="seconds", metavar="S", gt=0)
+    quiet: bool = setting(False, "no live status line")
+
+    def __post_init__(self):
+        check(self)
