@@ -24,8 +24,9 @@ demo: $(STAMP)
 	$(BIN)/omnijax demo --out $(OUT)/demo
 	@echo "open $(OUT)/demo/annotated.mp4 (the operator's view) and $(OUT)/demo/summary.json (the scores)"
 
-# Two workers, one test file each at a time (module fixtures such as the demo run stay in one process).
-XDIST := -n 2 --dist loadfile
+# Two workers, one test file each at a time (module fixtures such as the demo run stay in one process),
+# files in collection order (tests/conftest.py puts the longest first; xdist would sort them by size).
+XDIST := -n 2 --dist loadfile --no-loadscope-reorder
 
 test: $(STAMP)
 	$(BIN)/ruff check .
