@@ -25,7 +25,7 @@ demo: $(STAMP)
 	@echo "open $(OUT)/demo/annotated.mp4 (the operator's view) and $(OUT)/demo/summary.json (the scores)"
 
 # Two workers, one test file each at a time (module fixtures such as the demo run stay in one process),
-# files in collection order (tests/conftest.py puts the longest first; xdist would sort them by size).
+# files in collection order (tests/conftest.py puts the longest first; xdist would sort them by test count).
 XDIST := -n 2 --dist loadfile --no-loadscope-reorder
 
 test: $(STAMP)
