@@ -107,7 +107,8 @@ class Sigmas(eqx.Module):
 
 
 class Detection(eqx.Module):
-    """Detection settings: sensor noise, rates, contrast, polar sampling and the default sigmas.
+    """Detection settings: sensor noise, rates, contrast, polar sampling and the sigmas that floor (and
+    default) each detection's (the aim pipeline's sigma rule, :func:`omnijax.aim.detection_sigmas`).
 
     ``c_min`` is the smallest per-pixel non-centrality (the Mahalanobis contrast of
     a person's chromaticity against the background) for which ``x_m`` must hold.
@@ -317,8 +318,9 @@ class DetectionSection(Section):
     sensor_sigma: Pos = Field(description="sensor noise per channel, grey levels")
     x_f: Prob = Field(description="false-alarm probability of a background radial line (eq 10)")
     x_m: Prob = Field(description="miss rate per person of contrast >= c_min")
-    sigma_r_f: Pos = Field(description="default sigma of the foot radius, px")
-    sigma_theta_f_deg: Pos = Field(description="default sigma of the foot azimuth, deg")
+    sigma_r_f: Pos = Field(description="floor (and default) of a detection's sigma of the foot radius, px")
+    sigma_theta_f_deg: Pos = Field(
+        description="floor (and default) of a detection's sigma of the foot azimuth, deg")
     c_min: Pos = Field(4.0, description="smallest person contrast (non-centrality per pixel) x_m holds for")
     n_theta: Annotated[int, Field(ge=36, le=4096)] = Field(360, description="radial lines")
     min_floor_radius: NonNeg = Field(0.3, description="floor radius under the camera left out, m")
