@@ -24,12 +24,6 @@ from tests.autodiff import assert_jacobians_close
 from tests.tolerances import FINITE_DIFF
 
 
-def _aim(rig, r_f, theta):
-    """:func:`aim` at a foot given as arrays: it is an ``eqx.filter_jit``, where a Python float is a
-    static argument (one compilation per value)."""
-    return aim(rig, jnp.asarray(r_f), jnp.asarray(theta))
-
-
 def _scipy_rectangle(cov, a, b):
     mvn = multivariate_normal(mean=[0, 0], cov=cov)
     return mvn.cdf([a, b]) - mvn.cdf([-a, b]) - mvn.cdf([a, -b]) + mvn.cdf([-a, -b])
@@ -75,7 +69,7 @@ def test_paper_factor_is_5_15_for_99_percent():
 
 @pytest.mark.parametrize("r_f,theta", [(40.0, 2.5), (100.0, 0.7), (130.0, -2.0), (60.0, 0.15)])
 def test_calibrated_zoom_is_the_largest_that_meets_p_contain(paper_rig, r_f, theta):
-    a = _aim(paper_rig, r_f, theta)
+    a = aim(paper_rig, r_f, theta)
     lens, z = paper_rig.foveal.lens, float(a.zoom.zoom)
     p = lambda zz: float(containment_probability(
         lens, zz, a.covariance.pan_tilt, a.pointing.tilt, a.pointing.slant, paper_rig.person.R_h))
@@ -106,7 +100,7 @@ def test_paper_rule_is_more_conservative_than_calibrated(paper_rig):
 
     paper = dataclasses.replace(paper_rig, zoom_rule="paper")
     for r_f, th in [(60.0, 2.0), (110.0, 1.0), (140.0, -2.5)]:
-        zp, zc = float(_aim(paper, r_f, th).zoom.zoom), float(_aim(paper_rig, r_f, th).zoom.zoom)
+        zp, zc = float(aim(paper, r_f, th).zoom.zoom), float(aim(paper_rig, r_f, th).zoom.zoom)
         assert zp < zc
 
 
@@ -126,7 +120,7 @@ def test_containment_probability_matches_simulated_pinhole_frames(paper_rig, r_f
     frames matches the predicted probability within 0.004 (binomial sd <= 0.0005 near 0.99; the
     rest is the small-angle mapping's bias)."""
     rig = paper_rig
-    a = _aim(rig, r_f, theta)
+    a = aim(rig, r_f, theta)
     cov = np.asarray(a.covariance.pan_tilt)
     rng = np.random.default_rng(0)
     err = rng.multivariate_normal([0, 0], cov, 40_000)
@@ -168,7 +162,7 @@ def test_calibrated_zoom_gradient_matches_finite_differences(paper_rig, r_f, the
     pan/tilt covariance (c00, c11, c01 kept symmetric), tilt, slant and 1 - p_contain (the scale on
     which the zoom changes). The root is found to 1e-12 in its normal score, so the differences
     carry ~1e-8 of noise: entries are compared to FINITE_DIFF relative plus 1e-7 absolute."""
-    a = _aim(paper_rig, r_f, theta)
+    a = aim(paper_rig, r_f, theta)
     lens = paper_rig.foveal.lens
     assert bool(a.zoom.feasible) and 1.0 < float(a.zoom.zoom) < 18.0
     assert np.min(np.abs(np.log(float(a.zoom.zoom) / np.asarray(lens.zoom)))) > 1e-3  # off the table's kinks
