@@ -24,15 +24,20 @@ demo: $(STAMP)
 	$(BIN)/omnijax demo --out $(OUT)/demo
 	@echo "open $(OUT)/demo/annotated.mp4 (the operator's view) and $(OUT)/demo/summary.json (the scores)"
 
+# Two workers, one test file each at a time (module fixtures such as the demo run stay in one process),
+# files in collection order (tests/conftest.py puts the longest first; xdist would sort them by test count).
+XDIST := -n 2 --dist loadfile --no-loadscope-reorder
+
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -m "not slow"
+	$(BIN)/python -m pytest -m "not slow" $(XDIST)
 
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest $(XDIST)
 
 bench: $(STAMP)
 	taskset -c 0 $(BIN)/python benchmarks/bench_uncertainty.py
+	taskset -c 0 $(BIN)/python benchmarks/bench_zoom.py
 	$(BIN)/python benchmarks/bench_ptz.py
 	taskset -c 0 $(BIN)/python benchmarks/bench_render.py
 

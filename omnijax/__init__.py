@@ -96,6 +96,7 @@ from .detection import (
     chromaticity as chromaticity,
     chromaticity_covariance as chromaticity_covariance,
     detect as detect,
+    estimate_sensor_noise as estimate_sensor_noise,
     foot_estimate as foot_estimate,
     foot_scores as foot_scores,
     foot_sigma_mc as foot_sigma_mc,
@@ -105,7 +106,6 @@ from .detection import (
     line_background as line_background,
     polar_range as polar_range,
     sector_mask as sector_mask,
-    sensor_noise as sensor_noise,
     window_profile as window_profile,
 )
 from .geometry import (

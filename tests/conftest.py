@@ -1,12 +1,30 @@
-"""Shared fixtures: float64 on, the rigs in configs/, a detector and a world built once per session."""
+"""Shared fixtures: float64 on, the rigs in configs/, a detector and a world built once per session;
+compiled programs shared through a persistent cache."""
 
 from __future__ import annotations
+
+import os
+import shutil
+import tempfile
 
 import jax
 import pytest
 from hypothesis import HealthCheck, settings
 
 from tests.paths import CONFIGS
+
+# One persistent compilation cache for the whole run: the `omnijax` child processes that CLI tests
+# start (and pytest-xdist's workers) inherit it through the environment, so a program compiled once
+# (the detector, the renderer, the loop's kernels) is not compiled again by the next process, nor by
+# a test that builds the same program from a new function. Removed at the end by the process that
+# made it; a JAX_COMPILATION_CACHE_DIR already set is used as it is.
+_OWN_CACHE = None
+if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
+    _OWN_CACHE = os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(prefix="omnijax-tests-xla-")
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.1")
+jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+jax.config.update("jax_persistent_cache_min_compile_time_secs",
+                  float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]))
 
 # float64 for the whole test session, as the `omnijax` command has it (omnijax's import leaves it alone)
 jax.config.update("jax_enable_x64", True)
@@ -15,6 +33,24 @@ settings.register_profile(
     "omnijax", deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
 )
 settings.load_profile("omnijax")
+
+
+#: The test file with the longest child process (`omnijax validate`, a minute or more): collected
+#: first, so that one of `make test`'s two workers (pytest-xdist, one file at a time) starts it at
+#: once and the other works through the short files meanwhile, instead of waiting for it at the
+#: end. The demo's file stays in its place: run beside `validate` on a loaded machine, its PTZ
+#: emulator answered too late for the driver to reconnect after the injected unplug.
+LONGEST_FIRST = ("tests/runtime/cli/test_variance_validate.py",)
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {path: k for k, path in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.nodeid.split("::")[0], len(rank)))
+
+
+def pytest_unconfigure(config):
+    if _OWN_CACHE is not None:
+        shutil.rmtree(_OWN_CACHE, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

@@ -6,9 +6,9 @@ from ._change import (
     adapt_background as adapt_background,
     change_image as change_image,
     change_measure as change_measure,
+    estimate_sensor_noise as estimate_sensor_noise,
     grey_change_measure as grey_change_measure,
     learn_background as learn_background,
-    sensor_noise as sensor_noise,
 )
 from ._chroma import (
     chromaticity as chromaticity,

@@ -33,7 +33,7 @@ class Background(eqx.Module):
 
 
 @functools.partial(jax.jit, static_argnames="pool")
-def sensor_noise(frames: UInt8[ArrayLike, "N H W 3"], floor=0.5, pool: int = 5) -> Float[Array, "H W"]:
+def estimate_sensor_noise(frames: UInt8[ArrayLike, "N H W 3"], floor=0.5, pool: int = 5) -> Float[Array, "H W"]:
     """Per-pixel sensor noise sigma (grey levels, pooled over the channels) from N frames.
 
     From consecutive-frame differences ``d`` (variance ``2 sigma^2``, quantisation
@@ -58,12 +58,12 @@ def sensor_noise(frames: UInt8[ArrayLike, "N H W 3"], floor=0.5, pool: int = 5) 
 def learn_background(frames: UInt8[ArrayLike, "N H W 3"], sigma=None, floor=0.5) -> Background:
     """Background from N frames: per pixel, the mean of the samples within 3 sigma of the median.
 
-    ``sigma`` (grey levels, scalar or per pixel) defaults to :func:`sensor_noise` of
+    ``sigma`` (grey levels, scalar or per pixel) defaults to :func:`estimate_sensor_noise` of
     the frames with the given ``floor``.
     """
     f = jnp.asarray(frames, jnp.float32)
     H, W = f.shape[1:3]
-    sigma = sensor_noise(frames, floor) if sigma is None else jnp.broadcast_to(
+    sigma = estimate_sensor_noise(frames, floor) if sigma is None else jnp.broadcast_to(
         jnp.asarray(sigma, jnp.float32), (H, W))
     med = _temporal_median(jnp.asarray(frames))
     keep = jnp.all(jnp.abs(f - med) <= 3 * sigma[..., None], axis=-1, keepdims=True)

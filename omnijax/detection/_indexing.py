@@ -30,9 +30,6 @@ from ..geometry import person_image_extent
 from ._change import MEASURES
 from ._polar import PolarIndex, body_radius
 
-#: Two-sided 99 % normal quantile: a sector's width is taken as theta_f's 99 % interval.
-Z99 = 2.5758293035489
-
 
 class Thresholds(eqx.Module):
     """Per-line lower and upper thresholds of ``M(theta)``, per-radius psi2 thresholds."""

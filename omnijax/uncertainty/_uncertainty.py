@@ -33,7 +33,6 @@ from ..camera import RadialProfile
 from ..geometry import floor_radius, foveal_offsets, pointing, wrap_pi
 
 OUTPUT_NAMES: tuple[str, ...] = ("pan", "tilt", "sin_pan", "tan_tilt")
-Method = Literal["autodiff", "analytic", "second_order", "montecarlo"]
 METHODS: tuple[str, ...] = ("autodiff", "analytic", "second_order", "montecarlo")
 
 

@@ -51,8 +51,8 @@ from ._sensor import (
     quantise as quantise,
 )
 from ._world import (
-    Frame as Frame,
     FrameState as FrameState,
+    RenderedFrame as RenderedFrame,
     Scene as Scene,
     Truth as Truth,
     World as World,

@@ -24,7 +24,7 @@ from jaxtyping import Array, Bool, Float, Int
 from ..config import Rig
 from ..geometry import SHOULDER
 from ._scenario import Furniture, Scenario
-from ._scene import XYZ, dot3, xyz
+from ._scene import XYZ, dot3
 
 #: Hip height over body height: trousers below, the top above.
 WAIST = 0.47
@@ -303,13 +303,6 @@ def _cylinder(o: XYZ, d: XYZ, cx, cy, radius, z0, z1):
     return jnp.where(hit, t_in, jnp.inf), slab_in > side_in
 
 
-def cylinder_hit(origin, direction, centre, radius, z0, z1) -> tuple[Array, Array]:
-    """Entry distance of rays into the upright cylinder over the disc (centre, radius) between
-    heights z0 and z1 (inf where missed, or where the ray starts inside), and whether the
-    entry is through a cap (else through the side)."""
-    return _cylinder(xyz(origin), xyz(direction), centre[0], centre[1], radius, z0, z1)
-
-
 def _sphere(o: XYZ, d: XYZ, cx, cy, cz, radius):
     ox, oy, oz = o[0] - cx, o[1] - cy, o[2] - cz
     dx, dy, dz = d
@@ -319,11 +312,6 @@ def _sphere(o: XYZ, d: XYZ, cx, cy, cz, radius):
     disc = b * b - a * c
     t = (-b - jnp.sqrt(jnp.maximum(disc, 0.0))) / jnp.maximum(a, 1e-30)
     return jnp.where((disc >= 0) & (t > 0) & (c > 0), t, jnp.inf)
-
-
-def sphere_hit(origin, direction, centre, radius) -> Array:
-    """Entry distance of rays into a sphere (inf where missed or starting inside)."""
-    return _sphere(xyz(origin), xyz(direction), centre[0], centre[1], centre[2], radius)
 
 
 class BodyHit(eqx.Module):

@@ -24,7 +24,7 @@ def quantise(image: Float[Array, "*b"]) -> UInt8[Array, "*b"]:
     return jnp.clip(jnp.floor(image + 0.5), 0.0, 255.0).astype(jnp.uint8)
 
 
-def sensor_noise(sigma, key: UInt32[Array, "2"], shape: tuple[int, ...]) -> Float[Array, "*s"]:
+def draw_sensor_noise(sigma, key: UInt32[Array, "2"], shape: tuple[int, ...]) -> Float[Array, "*s"]:
     """``sigma N(0, 1)`` per pixel and channel (float32, grey levels), independent across pixels,
     channels and keys."""
     return jnp.asarray(sigma, jnp.float32) * gaussian(key, shape)
@@ -43,9 +43,9 @@ def digitise(image: Float[Array, "H W 3"], jpeg_quality: int = 0, keep=True) -> 
 def expose(
     linear: Float[Array, "H W 3"], sigma, key: UInt32[Array, "2"], jpeg_quality: int = 0
 ) -> UInt8[Array, "H W 3"]:
-    """The 8-bit RGB frame of a noise-free image in grey levels: :func:`sensor_noise` added,
+    """The 8-bit RGB frame of a noise-free image in grey levels: :func:`draw_sensor_noise` added,
     quantised, JPEG-compressed if ``jpeg_quality`` (1..100) is given."""
-    return digitise(linear + sensor_noise(sigma, key, linear.shape), jpeg_quality)
+    return digitise(linear + draw_sensor_noise(sigma, key, linear.shape), jpeg_quality)
 
 
 def effective_sigma(sigma: float) -> float:

@@ -30,7 +30,7 @@ from ._people import Paths, People, body, body_distance, draw_people, walk, walk
 from ._render import OmniBackground, build_background, render_linear, window_size
 from ._scenario import Scenario
 from ._scene import Room3D, build_room, f32, intersect_room, xyz
-from ._sensor import digitise, sensor_noise
+from ._sensor import digitise, draw_sensor_noise
 
 #: Spacing (m) of the floor grid on which the people's largest image is found.
 WINDOW_GRID = 0.05
@@ -91,7 +91,7 @@ class Truth(eqx.Module):
     illumination: Float[Array, ""]
 
 
-class Frame(eqx.Module):
+class RenderedFrame(eqx.Module):
     """A rendered omni frame: 8-bit RGB ``image``, ``labels`` (person index covering each pixel
     by at least half, -1 for none), and the frame's :class:`Truth`."""
 
@@ -210,11 +210,11 @@ class World(eqx.Module):
     def noise_key(self) -> UInt32[Array, "2"]:
         return self.scene.noise_key
 
-    def frame(self, t) -> Frame:
+    def frame(self, t) -> RenderedFrame:
         """Frame ``t``: image, labels and truth (jitted)."""
         return render_state(self.scene, self.state(t))
 
-    def frames(self, ts) -> Frame:
+    def frames(self, ts) -> RenderedFrame:
         """Frames ``ts`` (1-D), stacked along a leading axis (see :func:`render_frames`)."""
         return render_frames(self, ts)
 
@@ -328,28 +328,28 @@ def _foot_visible(scene: Scene, foot: Float[Array, "p 2"]) -> Bool[Array, " p"]:
     return ~hidden
 
 
-def _frame(scene: Scene, state: FrameState) -> Frame:
+def _frame(scene: Scene, state: FrameState) -> RenderedFrame:
     sensor = scene.scenario.sensor
     lin = _linear(scene, state)
     live = state.t >= 0  # True at run time, unknown to XLA: see own_buffer
     clean = own_buffer(lin.image, live)  # else XLA fuses the noise into the composition, unvectorised
-    noise = sensor_noise(sensor.noise_sigma, derive_key(scene.noise_key, state.t), clean.shape)
+    noise = draw_sensor_noise(sensor.noise_sigma, derive_key(scene.noise_key, state.t), clean.shape)
     image = digitise(clean + noise, sensor.jpeg_quality, live)
-    return Frame(image=image, labels=lin.labels, truth=frame_truth(scene, state, lin.area))
+    return RenderedFrame(image=image, labels=lin.labels, truth=frame_truth(scene, state, lin.area))
 
 
 @eqx.filter_jit
-def render_state(scene: Scene, state: FrameState) -> Frame:
-    """The omni camera's frame of ``state``: 8-bit image, labels and truth (see :class:`Frame`)."""
+def render_state(scene: Scene, state: FrameState) -> RenderedFrame:
+    """The omni camera's frame of ``state``: 8-bit image, labels and truth (see :class:`RenderedFrame`)."""
     return _frame(scene, state)
 
 
-def render_frame(world: World, t) -> Frame:
+def render_frame(world: World, t) -> RenderedFrame:
     """Frame ``t`` of ``world`` (same as ``world.frame(t)``)."""
     return world.frame(t)
 
 
-def render_frames(world: World, ts) -> Frame:
+def render_frames(world: World, ts) -> RenderedFrame:
     """Frames ``ts`` (a sequence or 1-D array of indices) of ``world``, rendered one by one (see
     :func:`frame_state`) and stacked along a leading axis."""
     frames = [world.frame(t) for t in np.asarray(ts, np.int64).reshape(-1)]

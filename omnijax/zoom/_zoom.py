@@ -12,7 +12,11 @@ table, clamped to the device's zoom range:
   is at least ``p_contain``. It is a root of ``P(frame) = p_contain``, found by
   false position inside a closed-form bracket; its derivatives come from the
   implicit function theorem (a ``jax.custom_jvp``), so the layout optimiser can
-  differentiate the face pixels through it.
+  differentiate the face pixels through it. (``optimistix.root_find`` was measured
+  against it on 400 covariances, one core: its Newton, Chord and Bisection were 1.8
+  to 9 times slower vmapped, and every derivative through ``ImplicitAdjoint`` holds a
+  host callback, lineax's error check, which keeps ``omnijax optimise``'s program out
+  of the persistent compilation cache: 6-7 s warm runs became 18-20 s.)
 
 The frame is treated in normalised image coordinates of the PTZ: a pointing error
 ``(e_pan, e_tilt)`` moves the head centre by ``(e_pan cos(tilt), e_tilt)``, the head

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from . import pelco_d, visca
-from .frames import Frame
+from .packets import Packet
 from .pelco_d import PelcoDParser
 from .profile import DeviceProfile, DeviceTarget
 from .visca import ErrorCode, ViscaParser
@@ -64,10 +64,10 @@ class ViscaDialect:
     def parser(self) -> ViscaParser:
         return ViscaParser()
 
-    def event(self, frame: Frame) -> Event | None:
-        if frame.error:
+    def event(self, packet: Packet) -> Event | None:
+        if packet.error:
             return None
-        r = visca.decode_reply(frame.data)
+        r = visca.decode_reply(packet.data)
         if r is None or (r.address not in (0, self.address)):
             return None
         if r.kind == "completion" and r.socket == 0 and r.payload:
@@ -127,8 +127,8 @@ class PelcoDDialect:
     def parser(self) -> PelcoDParser:
         return PelcoDParser(replies=True)
 
-    def event(self, frame: Frame) -> Event | None:
-        msg = pelco_d.decode(frame.data)
+    def event(self, packet: Packet) -> Event | None:
+        msg = pelco_d.decode(packet.data)
         if msg.address != self.address:
             return None
         if isinstance(msg, pelco_d.GeneralResponse):

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from . import pelco_d, visca
-from .frames import Frame
+from .packets import Packet
 from .pelco_d import PelcoDParser
 from .profile import DeviceProfile
 from .visca import ErrorCode, ViscaError, ViscaParser
@@ -192,18 +192,18 @@ class ViscaCamera(_Camera):
         self.errors += 1
         return [visca.error(self.address, socket, code)]
 
-    def receive(self, frame: Frame, now: float) -> list[bytes]:
+    def receive(self, packet: Packet, now: float) -> list[bytes]:
         """Replies to one framed packet (none if it is not addressed to this camera)."""
         self.advance(now)
-        header = frame.data[0]
+        header = packet.data[0]
         receiver = header & 0x0F
         if header >> 4 != 0x8 or receiver not in (self.address, visca.BROADCAST):
             return []
         self.commands += 1
-        if frame.error:
+        if packet.error:
             return self._error(0, ErrorCode.MESSAGE_LENGTH)
         try:
-            cmd = visca.decode_command(frame.data)
+            cmd = visca.decode_command(packet.data)
         except ViscaError as exc:
             return self._error(0, exc.code)
         return self._execute(cmd)
@@ -280,10 +280,10 @@ class PelcoDCamera(_Camera):
         super().__init__(profile, profile.address if address is None else address, now)
         self.presets: dict[int, tuple[float, float, float]] = {}
 
-    def receive(self, frame: Frame, now: float) -> list[bytes]:
+    def receive(self, packet: Packet, now: float) -> list[bytes]:
         """Replies to one framed packet (none if it is for another address, unsupported or out of range)."""
         self.advance(now)
-        msg = pelco_d.decode(frame.data)
+        msg = pelco_d.decode(packet.data)
         if not isinstance(msg, pelco_d.Message) or msg.address != self.address:
             return []
         self.commands += 1
@@ -371,7 +371,6 @@ class PtyEmulator:
             self._parser = PelcoDParser(replies=False)
         self.state_file = Path(state_file) if state_file else None
         self.link = Path(link) if link else None
-        self.dropped_replies = 0
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
@@ -402,8 +401,8 @@ class PtyEmulator:
                 with self._lock:
                     if ready:
                         data = self._read()
-                        for frame in self._parser.feed(data):
-                            replies += self.camera.receive(frame, now)
+                        for packet in self._parser.feed(data):
+                            replies += self.camera.receive(packet, now)
                         if isinstance(self._parser, PelcoDParser):
                             self.camera.errors += self._parser.rejected
                             self._parser.rejected = 0
@@ -432,12 +431,11 @@ class PtyEmulator:
         self.write(reply)
 
     def write(self, data: bytes) -> None:
-        """Write to the client without blocking; what does not fit in the pty is dropped (and counted)."""
+        """Write to the client without blocking; what does not fit in the pty is dropped."""
         while data:
             try:
                 n = os.write(self._master, data)
             except (BlockingIOError, OSError):
-                self.dropped_replies += 1
                 return
             data = data[n:]
 

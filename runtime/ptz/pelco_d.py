@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .frames import Frame
+from .packets import Packet
 
 SYNC = 0xFF
 FRAME_LEN = 7
@@ -167,15 +167,15 @@ class PelcoDParser:
         self._offset += n
         self.garbage_bytes += n
 
-    def _take(self, n: int, out: list[Frame]) -> None:
-        out.append(Frame(bytes(self._buf[:n]), self._offset, self._offset + n))
+    def _take(self, n: int, out: list[Packet]) -> None:
+        out.append(Packet(bytes(self._buf[:n]), self._offset, self._offset + n))
         del self._buf[:n]
         self._offset += n
 
-    def feed(self, data: bytes) -> list[Frame]:
+    def feed(self, data: bytes) -> list[Packet]:
         """Consume ``data``; return the packets it completed, in order."""
         self._buf += data
-        out: list[Frame] = []
+        out: list[Packet] = []
         buf = self._buf
         while buf:
             i = buf.find(SYNC)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Literal
 
-from .frames import Frame
+from .packets import Packet
 
 TERMINATOR = 0xFF
 #: Longest legal packet, header and terminator included.
@@ -192,7 +192,7 @@ class ViscaParser:
     one (the unterminated one is dropped as garbage), so a valid packet is found
     whatever garbage precedes it. Bytes outside packets are counted in
     ``garbage_bytes``. A packet longer than :data:`MAX_PACKET` is reported once,
-    at its terminator, as a :class:`Frame` with ``error="overlong"``; one of
+    at its terminator, as a :class:`Packet` with ``error="overlong"``; one of
     fewer than 3 bytes (``8x FF``) with ``error="short"``; both make a camera
     answer "message length error".
     """
@@ -204,9 +204,9 @@ class ViscaParser:
         self._overlong = False
         self.garbage_bytes = 0
 
-    def feed(self, data: bytes) -> list[Frame]:
+    def feed(self, data: bytes) -> list[Packet]:
         """Consume ``data``; return the packets it completed, in order."""
-        out: list[Frame] = []
+        out: list[Packet] = []
         buf = self._buf
         for i, b in enumerate(data):
             pos = self._offset + i
@@ -216,11 +216,11 @@ class ViscaParser:
                     continue
                 end = pos + 1
                 if self._overlong:
-                    out.append(Frame(bytes(buf), self._start, end, "overlong"))
+                    out.append(Packet(bytes(buf), self._start, end, "overlong"))
                 elif len(buf) < 2:
-                    out.append(Frame(bytes(buf) + b"\xff", self._start, end, "short"))
+                    out.append(Packet(bytes(buf) + b"\xff", self._start, end, "short"))
                 else:
-                    out.append(Frame(bytes(buf) + b"\xff", self._start, end))
+                    out.append(Packet(bytes(buf) + b"\xff", self._start, end))
                 buf.clear()
                 self._overlong = False
             elif b & 0x80:

@@ -18,11 +18,11 @@ from omnijax import (
     change_image,
     change_measure,
     detect,
+    estimate_sensor_noise,
     foot_scores,
     hysteresis_sectors,
     learn_background,
     line_background,
-    sensor_noise,
 )
 from omnijax.detection import chi2_variate, noncentral_chi2_variate
 
@@ -52,7 +52,7 @@ def test_sensor_noise_recovers_sigma_with_quantisation():
     rng = np.random.default_rng(2)
     base = _textured(rng, 96, 128)
     frames = np.stack([_noisy(rng, base, 1.5) for _ in range(20)])
-    sigma = np.asarray(sensor_noise(frames))
+    sigma = np.asarray(estimate_sensor_noise(frames))
     expect = math.sqrt(1.5**2 + 1 / 12)  # the quantiser adds 1/12 grey level^2
     assert np.median(sigma) == pytest.approx(expect, rel=0.03)
     assert np.percentile(sigma, 95) < 1.2 * expect

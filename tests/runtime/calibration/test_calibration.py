@@ -53,7 +53,7 @@ def test_readings_match_plain_world_geometry(paper_rig):
     The foot pixel is the paraboloid's r = r_m tan(phi / 2) about the true centre.
     """
     rig, settings = _noiseless(paper_rig)
-    problem, truth, drawn = simulate_calibration(jax.random.key(5), rig, settings, 8)
+    problem, truth, drawn = simulate_calibration(jax.random.key(5), rig, settings, 6)
     assert bool(drawn)
     H_o, D_c, theta_c, H_f, pan0, tilt0, x_c, y_c, r_m = np.asarray(truth)
     o = problem.obs
@@ -117,8 +117,8 @@ def test_marks_at_one_height_leave_the_scale_undetermined(paper_rig):
 
 
 def test_positions_on_one_radial_line_are_refused(paper_rig):
-    problem, _, _ = simulate_calibration(jax.random.key(3), paper_rig, _settings(paper_rig), 8)
-    line = eqx.tree_at(lambda p: p.obs.theta_f, problem, jnp.full(8, 0.7))
+    problem, _, _ = simulate_calibration(jax.random.key(3), paper_rig, _settings(paper_rig), 6)
+    line = eqx.tree_at(lambda p: p.obs.theta_f, problem, jnp.full(6, 0.7))
     why = check_fit(fit_rig(line))
     assert why is not None and ("determined only to sigma" in why or "do not determine" in why), why
 

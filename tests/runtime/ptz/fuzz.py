@@ -75,7 +75,7 @@ def pelco_reply_packets(rng: random.Random) -> list[bytes]:
 
 @dataclass(frozen=True)
 class Kind:
-    """A parser under test: how to make it, valid packets for it, and what a well-formed frame is."""
+    """A parser under test: how to make it, valid packets for it, and what a well-formed packet is."""
 
     name: str
     parser: Callable[[], ViscaParser | PelcoDParser]
@@ -157,12 +157,12 @@ def mutated_stream(rng: random.Random, kind: Kind) -> tuple[bytes, list[tuple[in
 
 
 def _feed_chunked(parser, stream: bytes, rng: random.Random) -> list:
-    frames, i = [], 0
+    out, i = [], 0
     while i < len(stream):
         n = rng.choice((1, 1, 2, 3, 5, 8, 17, 64))
-        frames += parser.feed(stream[i:i + n])
+        out += parser.feed(stream[i:i + n])
         i += n
-    return frames
+    return out
 
 
 @dataclass
@@ -188,10 +188,10 @@ def check_stream(kind: Kind, stream: bytes, intact: list[tuple[int, int]], rng: 
         return StreamResult(len(intact), problems=(f"exception {type(exc).__name__}: {exc}",))
     seconds = time.perf_counter() - t0
     if whole != chunked:
-        problems.append("chunking changed the frames")
+        problems.append("chunking changed the packets")
     for f in whole:
         if f.error is None and (stream[f.start:f.end] != f.data or not kind.well_formed(f.data)):
-            problems.append(f"bad frame {f.data.hex(' ')} at {f.start}")
+            problems.append(f"bad packet {f.data.hex(' ')} at {f.start}")
     spans = {(f.start, f.end) for f in whole if f.error is None}
     spurious = [s for s in spans if s not in set(intact)]
     found = explained = 0

@@ -1,8 +1,8 @@
 """Parser fuzzing: 1500 random and 1500 mutated streams per parser, fixed seeds (the benchmark runs >= 1e4).
 
 Deterministic (seeded), so no false failures: a failure is a reproducible bug.
-Properties per stream: no exception, the same frames whether fed whole or in
-random chunks, every frame well-formed and equal to the bytes at its offsets,
+Properties per stream: no exception, the same packets whether fed whole or in
+random chunks, every packet well-formed and equal to the bytes at its offsets,
 every intact valid packet found (Pelco-D: unless noise overlapping it formed a
 checksum-valid packet, which is counted, and must stay rare).
 """

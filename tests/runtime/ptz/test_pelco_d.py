@@ -52,8 +52,8 @@ def test_parser_resynchronises_after_a_bad_checksum_and_partial_reads():
     bad[6] ^= 0x01
     stream = b"\x00\xff\x01" + good[0] + bytes(bad) + good[1][:3]
     p = PelcoDParser()
-    frames = [f for b in stream + good[1][3:] for f in p.feed(bytes((b,)))]
-    assert [f.data for f in frames] == good
+    got = [f for b in stream + good[1][3:] for f in p.feed(bytes((b,)))]
+    assert [f.data for f in got] == good
     assert p.rejected >= 1
 
 
@@ -61,8 +61,8 @@ def test_reply_parser_reads_both_lengths():
     replies = [pelco_d.general_response(1), pelco_d.position_reply(1, pelco_d.REPLY_PAN, 35999),
                pelco_d.general_response(1, 0x80)]
     stream = b"\xff\x00" + b"".join(replies)
-    frames = PelcoDParser(replies=True).feed(stream)
-    assert [f.data for f in frames] == replies
+    got = PelcoDParser(replies=True).feed(stream)
+    assert [f.data for f in got] == replies
 
 
 def test_commands_with_reserved_bits_are_not_framed():

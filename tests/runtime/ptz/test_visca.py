@@ -95,17 +95,17 @@ def test_parser_survives_partial_reads_and_garbage():
     packets = [visca.ack(1, 1), visca.pan_tilt_position_reply(1, 100, -5), visca.completion(1, 1)]
     stream = b"\x00\x13\xff" + packets[0] + b"\x91\x02" + packets[1] + b"\x7f\x7f" + packets[2]
     p = ViscaParser()
-    frames = [f for b in stream for f in p.feed(bytes((b,)))]
-    assert [f.data for f in frames] == packets
-    assert [stream[f.start:f.end] for f in frames] == packets
+    got = [f for b in stream for f in p.feed(bytes((b,)))]
+    assert [f.data for f in got] == packets
+    assert [stream[f.start:f.end] for f in got] == packets
     assert p.garbage_bytes == len(stream) - sum(map(len, packets))
 
 
 def test_parser_reports_overlong_and_short_packets_then_resynchronises():
     overlong = bytes.fromhex("81" + " 01" * 20 + " ff")
     p = ViscaParser()
-    frames = p.feed(overlong + bytes.fromhex("81 ff") + visca.ack(1, 1))
-    assert [f.error for f in frames] == ["overlong", "short", None]
-    assert frames[0].start == 0 and frames[0].end == len(overlong)
-    assert len(frames[0].data) < visca.MAX_PACKET
-    assert frames[2].data == visca.ack(1, 1)
+    got = p.feed(overlong + bytes.fromhex("81 ff") + visca.ack(1, 1))
+    assert [f.error for f in got] == ["overlong", "short", None]
+    assert got[0].start == 0 and got[0].end == len(overlong)
+    assert len(got[0].data) < visca.MAX_PACKET
+    assert got[2].data == visca.ack(1, 1)

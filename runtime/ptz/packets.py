@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 
 @dataclass(frozen=True)
-class Frame:
+class Packet:
     """One packet cut out of a byte stream.
 
     ``start`` and ``end`` are offsets into everything the parser has been fed
