@@ -66,7 +66,8 @@ class Case:
     exit: int = 2
     timeout: float = 150.0
     setup: Callable[[Path], None] | None = None
-    signal: tuple[int, str, float] | None = None  # (signal, stderr text to wait for, then seconds)
+    signal: tuple[int, str, float, bool] | None = None  # (signal, stderr text to wait for, then seconds, to the
+    #                                                        whole process group as a terminal's Ctrl-C is)
     unprivileged: bool = False  # without root's permission to write anywhere (CAP_DAC_OVERRIDE)
     emulator: bool = False  # start a ptz-emulator and put its pty in {pty}
     check: Callable[[Path, str, str], str | None] | None = None  # for exit-0 cases: what is wrong, or None
@@ -515,16 +516,23 @@ def cases(repo: Path) -> list[Case]:
         expect="nope.avi")
 
     # ---- signals during start-up: handlers from the start, nothing half-written, no child left
-    for sig, marker, delay in ((signal.SIGTERM, "", 1.0), (signal.SIGTERM, "building the world", 2.0),
-                               (signal.SIGTERM, "PTZ emulator", 0.5), (signal.SIGTERM, "PTZ emulator", 5.0),
-                               (signal.SIGINT, "PTZ emulator", 2.0)):
-        add("demo", f"{signal.Signals(sig).name} {delay:g} s after {marker or 'start'!r}",
-            ["demo", "--out", "o", "--frames", "400"], exit=130, signal=(sig, marker, delay), expect="interrupted")
+    for sig, marker, delay, group in ((signal.SIGTERM, "", 1.0, False),
+                                      (signal.SIGTERM, "building the world", 2.0, False),
+                                      (signal.SIGTERM, "PTZ emulator", 0.5, False),
+                                      (signal.SIGTERM, "PTZ emulator", 5.0, False),
+                                      (signal.SIGINT, "PTZ emulator", 2.0, False),
+                                      (signal.SIGINT, "PTZ emulator", 3.0, True),
+                                      (signal.SIGKILL, "PTZ emulator", 3.0, False)):
+        to = " to the process group (Ctrl-C)" if group else ""
+        add("demo", f"{signal.Signals(sig).name}{to} {delay:g} s after {marker or 'start'!r}",
+            ["demo", "--out", "o", "--frames", "400"], exit=-9 if sig == signal.SIGKILL else 130,
+            signal=(sig, marker, delay, group), expect="interrupted")
     for cmd, argv in (("run", [*jobs["run"], "--out", "o"]), ("validate", [*jobs["validate"], "--out", "o"]),
                       ("optimise", [*jobs["optimise"], "--out", "o"]), ("render", ["render", "--scenario",
                                                                                     "one_person", "--frames", "200",
                                                                                     "--out", "o"])):
-        add(cmd, "SIGTERM 8 s after start", argv, exit=130, signal=(signal.SIGTERM, "", 8.0), expect="interrupted")
+        add(cmd, "SIGTERM 8 s after start", argv, exit=130, signal=(signal.SIGTERM, "", 8.0, False),
+            expect="interrupted")
 
     # ---- the demo says what it wrote
     add("demo", "--screenshot past the last frame: view.png not listed",
@@ -594,7 +602,7 @@ def run_case(case: Case, index: int, repo: Path, fixtures: Path) -> dict:
     tag = f"{os.getpid()}-{index}"
     tmp = Path(tempfile.mkdtemp(prefix="hostile-"))
     shared = fixtures.parent
-    env = {**os.environ, "PYTHONPATH": str(repo), MARK: tag, "HOME": str(shared / "home"),
+    env = {**os.environ, "PYTHONPATH": str(repo), MARK: tag, "PYTHONFAULTHANDLER": "1", "HOME": str(shared / "home"),
            "XDG_CACHE_HOME": str(shared / "cache"), "MPLCONFIGDIR": str(shared / "mpl")}
     emulator = None
     try:
@@ -615,20 +623,24 @@ def run_case(case: Case, index: int, repo: Path, fixtures: Path) -> dict:
             prefix = ["setpriv", f"--bounding-set={caps}", f"--inh-caps={caps}"]
         t0 = time.monotonic()
         proc = subprocess.Popen([*prefix, sys.executable, "-m", "runtime.cli", *argv], cwd=tmp, env=env, text=True,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, errors="replace")
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, errors="replace",
+                                start_new_session=True)
         chunks = {"out": [], "err": []}
         readers = [threading.Thread(target=lambda s=s, k=k: chunks[k].extend(iter(s.readline, "")), daemon=True)
                    for s, k in ((proc.stdout, "out"), (proc.stderr, "err"))]
         for r in readers:
             r.start()
         if case.signal is not None:
-            sig, marker, delay = case.signal
+            sig, marker, delay, group = case.signal
             while marker and marker not in "".join(chunks["err"]) and proc.poll() is None \
                     and time.monotonic() - t0 < case.timeout:
                 time.sleep(0.05)
             time.sleep(delay)
             if proc.poll() is None:
-                proc.send_signal(sig)
+                if group:
+                    os.killpg(proc.pid, sig)
+                else:
+                    proc.send_signal(sig)
         try:
             rc = proc.wait(case.timeout - (time.monotonic() - t0))
             hung = False
@@ -639,8 +651,12 @@ def run_case(case: Case, index: int, repo: Path, fixtures: Path) -> dict:
             r.join(5)
         seconds = time.monotonic() - t0
         stdout, stderr = "".join(chunks["out"]), "".join(chunks["err"])
-        time.sleep(1.0)  # children that watch their parent go within a second
         left = _survivors(tag)
+        for _ in range(50):  # children that watch their parent are given 5 s to go
+            if not left:
+                break
+            time.sleep(0.1)
+            left = _survivors(tag)
         for pid in left:
             try:
                 os.kill(pid, signal.SIGKILL)
@@ -649,7 +665,8 @@ def run_case(case: Case, index: int, repo: Path, fixtures: Path) -> dict:
         after = _snapshot(tmp)
         verdict, reason = classify(case, rc, hung, stdout, stderr, before, after, left, tmp)
         return {"command": case.command, "case": case.name, "argv": argv, "exit": rc, "seconds": round(seconds, 1),
-                "verdict": verdict, "reason": reason, "stderr_tail": stderr.strip().splitlines()[-3:]}
+                "verdict": verdict, "reason": reason,
+                "stderr_tail": stderr.strip().splitlines()[-(3 if verdict == "clean" else 40):]}
     finally:
         if emulator is not None:
             os.killpg(emulator.pid, signal.SIGKILL)
@@ -670,6 +687,9 @@ def classify(case: Case, rc: int, hung: bool, stdout: str, stderr: str, before: 
                      and not (case.exit == 0 and k.split("/")[0] == "o"))
     if case.signal is not None and rc == 0 and (tmp / "o" / "summary.json").is_file() and not left:
         return "clean", ""  # the signal came after start-up: the loop ended cleanly and wrote everything
+    if case.signal is not None and case.signal[0] == signal.SIGKILL and rc == -signal.SIGKILL:
+        # nothing can clean up after SIGKILL (a staging folder stays); what must not stay is a child
+        return ("other", f"{len(left)} child process(es) outlived the command") if left else ("clean", "")
     if rc == case.exit:
         if left:
             return "other", f"{len(left)} child process(es) outlived the command"

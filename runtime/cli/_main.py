@@ -93,3 +93,18 @@ def main(argv: list[str] | None = None) -> int:
             what = exc.describe() if isinstance(exc, Interrupted) else "interrupted"
             print(f"{command}: {what}", file=sys.stderr)
             return 130
+
+
+def console() -> None:
+    """The ``omnijax`` executable (and ``python -m runtime.cli``): :func:`main`, then exit with its code.
+
+    After Ctrl-C or SIGTERM (exit code 130) the process ends at once, once :func:`main` has cleaned
+    up (staged outputs removed, child processes stopped): JAX may still be compiling on its own
+    threads, and the interpreter's normal shutdown underneath them can crash (SIGSEGV).
+    """
+    code = main()
+    if code == 130:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    sys.exit(code)

@@ -5,8 +5,9 @@ follows the pty) and ``--state-file``; the driver opens the link. :meth:`unplug`
 emulator, so the port vanishes as when a USB adapter is pulled, and starts a new one on the
 same link after a delay, as when it is plugged back in.
 
-The child never outlives this process: leaving the context manager in any way (an error,
-Ctrl-C, SIGTERM) stops it, and it runs with ``--parent-pid`` set to this process, so that it stops by
+The child never outlives this process: it runs in its own session (Ctrl-C in a terminal
+reaches this process only), leaving the context manager in any way (an error, Ctrl-C,
+SIGTERM) stops it, and it runs with ``--parent-pid`` set to this process, so that it stops by
 itself within a fraction of a second if this process dies without cleaning up (SIGKILL).
 """
 
@@ -46,8 +47,9 @@ class EmulatorProcess:
         if self.profile:
             cmd += ["--ptz-profile", self.profile]
         with self._lock:
+            # its own session: Ctrl-C in the terminal reaches this process, which stops the child itself
             self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                                         cwd=Path(__file__).resolve().parents[2])
+                                         cwd=Path(__file__).resolve().parents[2], start_new_session=True)
             line = self.proc.stdout.readline().strip()
         if not line:
             raise RuntimeError(f"the PTZ emulator did not start (exit code {self.proc.poll()})")
