@@ -566,6 +566,7 @@ def _lists_only_written(tmp: Path, stdout: str, stderr: str) -> str | None:
 
 _ERROR = re.compile(r"^omnijax [\w-]+: (error: |interrupted)")
 _OWN = re.compile(r"^omnijax [\w-]+: ")
+_PROGRESS = re.compile(r"\d+%\|")
 
 
 def _survivors(tag: str) -> list[int]:
@@ -710,6 +711,8 @@ def classify(case: Case, rc: int, hung: bool, stdout: str, stderr: str, before: 
             if usage and s.startswith(" "):
                 continue
             usage = False
+            if case.signal is not None and _PROGRESS.search(s):
+                continue  # a job interrupted while working has shown its progress
             if not _OWN.match(s):
                 return "other", f"foreign line before the error: {s[:160]}"
         if case.expect and case.expect.lower() not in lines[-1].lower():

@@ -27,13 +27,15 @@ class UsageError(ValueError):
 
 class Interrupted(KeyboardInterrupt):
     """Ctrl-C or SIGTERM arrived (exit 130). ``during`` says what was going on ("during start-up"),
-    ``unwritten`` the output folder that was not written; the code unwinding through it fills them in."""
+    ``unwritten`` the output folder that was not written, ``written`` that the outputs were complete;
+    the code unwinding through it fills them in."""
 
     def __init__(self, signame: str = "SIGINT"):
         super().__init__(signame)
         self.signame = signame
         self.during: str | None = None
         self.unwritten: str | None = None
+        self.written = False  # it arrived while outputs were moved into place, which was finished first
 
     def describe(self) -> str:
         """``interrupted by SIGTERM during start-up; nothing written to DIR``."""

@@ -81,14 +81,18 @@ def staged_output(out: str | Path) -> Iterator[Path]:
         except Interrupted as exc:
             exc.unwritten = exc.unwritten or shown
             raise
-        with interrupts_held():
-            out.mkdir(parents=True, exist_ok=True)
-            for item in sorted(stage.rglob("*")):
-                target = out / item.relative_to(stage)
-                if item.is_dir():
-                    target.mkdir(parents=True, exist_ok=True)
-                else:
-                    os.replace(item, target)
+        try:
+            with interrupts_held():
+                out.mkdir(parents=True, exist_ok=True)
+                for item in sorted(stage.rglob("*")):
+                    target = out / item.relative_to(stage)
+                    if item.is_dir():
+                        target.mkdir(parents=True, exist_ok=True)
+                    else:
+                        os.replace(item, target)
+        except Interrupted as exc:
+            exc.written = True
+            raise
     finally:
         shutil.rmtree(stage, ignore_errors=True)
 

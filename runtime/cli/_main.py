@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     environment while JAX is not imported yet, so that commands that never use it stay quick.
     """
     with interrupt_handlers():
-        command = "omnijax"
+        command, args = "omnijax", None
         try:
             enable_float64()
             try:
@@ -90,6 +90,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{command}: error: {exc}", file=sys.stderr)
             return 2
         except KeyboardInterrupt as exc:
+            if isinstance(exc, Interrupted) and exc.unwritten is None and not exc.written and args is not None:
+                exc.unwritten = getattr(args, "out", None)  # interrupted before its outputs were staged
             what = exc.describe() if isinstance(exc, Interrupted) else "interrupted"
             print(f"{command}: {what}", file=sys.stderr)
             return 130
