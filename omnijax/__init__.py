@@ -24,7 +24,12 @@ start (``jax.config.update("jax_enable_x64", True)``); a program of your own sho
 from .aim import (
     Aim as Aim,
     aim as aim,
+    aim_at_floor as aim_at_floor,
+    aim_detection as aim_detection,
+    aim_from_image as aim_from_image,
     aim_with_covariance as aim_with_covariance,
+    detection_sigmas as detection_sigmas,
+    floor_from_detections as floor_from_detections,
 )
 from .calibration import (
     GLOBAL_NAMES as GLOBAL_NAMES,
@@ -128,6 +133,7 @@ from .uncertainty import (
     pointing_outputs as pointing_outputs,
 )
 from .zoom import (
+    ZOOM_RULES as ZOOM_RULES,
     ZoomChoice as ZoomChoice,
     choose_zoom as choose_zoom,
     containment_probability as containment_probability,

@@ -1,9 +1,8 @@
 """Layout objectives: pan/tilt variance and face pixels over the floor, for one PTZ placement.
 
-For every floor point (X, Y) the foot's image position follows from the omni
-camera (eq 1 inverted, :func:`omnijax.point_image_radius`); the foundation then
-gives the pointing covariance (``pointing_covariance``, autodiff, eq 13/14's
-quantities) and the zoom of the rig's rule (``aim_with_covariance``). Per point:
+Every floor point (X, Y) goes through the aim pipeline (:func:`omnijax.aim_at_floor`) as a
+detection there with the rig's default sigmas: its image position (eq 1 inverted), the pointing
+covariance (autodiff, eq 13/14's quantities) and the zoom of the rig's rule. Per point:
 
 - ``variance``: ``var(pan) + var(tilt)`` (rad^2), the paper's pan and tilt uncertainty;
 - ``face_px``: the head's width in foveal pixels at the chosen zoom
@@ -35,14 +34,7 @@ import jax.numpy as jnp
 from jax.scipy.special import logsumexp
 from jaxtyping import Array, Bool, Float
 
-from omnijax import (
-    Rig,
-    aim_with_covariance,
-    containment_probability,
-    face_pixels,
-    point_image_radius,
-    pointing_covariance,
-)
+from omnijax import Rig, aim_at_floor, containment_probability, face_pixels
 
 #: +1 where a larger per-point value is worse (variance), -1 where it is better (face pixels).
 SENSE = {"variance": 1.0, "face_px": -1.0}
@@ -118,11 +110,9 @@ def floor_values(rig: Rig, layout: Layout, X: Float[Array, " n"], Y: Float[Array
     """
     rig = place(rig, layout)
     omni = rig.omni
-    r_f = point_image_radius(jnp.hypot(X, Y), 0.0, omni.r_m, omni.H_o, omni.profile)
-    x = rig.input_mean(r_f, jnp.arctan2(Y, X))
-    cov = pointing_covariance(x, rig.input_sigma(), omni.profile)
-    aimed = jax.vmap(aim_with_covariance, in_axes=(None, 0, 0))(rig, x, cov)
-    p, z, lens = aimed.pointing, aimed.zoom, rig.foveal.lens
+    aimed = jax.vmap(aim_at_floor, in_axes=(None, 0))(rig, jnp.stack([X, Y], -1))
+    p, z, cov, lens = aimed.pointing, aimed.zoom, aimed.covariance, rig.foveal.lens
+    r_f = aimed.x[:, 0]
     # The probability at the widest zoom, not at the chosen one: the same where the
     # factor is below 1 and for feasibility, and it keeps the zoom's root out of P's
     # gradient (which halved the search's compile time).

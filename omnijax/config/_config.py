@@ -122,7 +122,8 @@ class Sigmas(eqx.Module):
 
 
 class Detection(eqx.Module):
-    """Detection settings: sensor noise, rates, contrast, polar sampling and the default sigmas.
+    """Detection settings: sensor noise, rates, contrast, polar sampling and the sigmas that floor (and
+    default) each detection's (the aim pipeline's sigma rule, :func:`omnijax.aim.detection_sigmas`).
 
     ``c_min`` is the smallest per-pixel non-centrality (the Mahalanobis contrast of
     a person's chromaticity against the background) for which ``x_m`` must hold.
@@ -358,8 +359,9 @@ class DetectionSection(Section):
         description="sensor noise per channel, grey levels")
     x_f: Prob = Field(description="false-alarm probability of a background radial line (eq 10)")
     x_m: Prob = Field(description="miss rate per person of contrast >= c_min")
-    sigma_r_f: Pixels = Field(description="default sigma of the foot radius, px")
-    sigma_theta_f_deg: PosSigmaDegrees = Field(description="default sigma of the foot azimuth, deg")
+    sigma_r_f: Pixels = Field(description="floor (and default) of a detection's sigma of the foot radius, px")
+    sigma_theta_f_deg: PosSigmaDegrees = Field(
+        description="floor (and default) of a detection's sigma of the foot azimuth, deg")
     c_min: Annotated[float, within(0.0, MAX_CONTRAST, "a non-centrality per pixel", open_low=True,
                                    why="more than two 8-bit colours' chromaticities can differ by")] = Field(
         4.0, description="smallest person contrast (non-centrality per pixel) x_m holds for")

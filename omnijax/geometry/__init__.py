@@ -7,6 +7,7 @@ from ._angles import (
 )
 from ._floor import (
     floor_measurement as floor_measurement,
+    floor_to_image as floor_to_image,
     image_position as image_position,
 )
 from ._person import (

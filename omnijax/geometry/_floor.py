@@ -44,6 +44,14 @@ def floor_measurement(
 
 
 @jax.jit
+def floor_to_image(rig: Rig, xy: Float[Array, "*b 2"]) -> Float[Array, "*b 2"]:
+    """(r_f, theta_f) (px, rad) at which the omni camera sees floor points ``xy`` (m): eq 1 inverted."""
+    o = rig.omni
+    xy = jnp.asarray(xy, float)
+    return jnp.moveaxis(_image_point(jnp.moveaxis(xy, -1, 0), o.r_m, o.H_o, o.profile), 0, -1)
+
+
+@jax.jit
 def image_position(rig: Rig, xy: Float[Array, "*b 2"], cov: Float[Array, "*b 2 2"]) -> tuple[Array, Array]:
     """(r_f, theta_f) of floor positions and their 2 x 2 covariance (autodiff of the projection)."""
     o = rig.omni

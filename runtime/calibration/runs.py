@@ -29,20 +29,15 @@ from omnijax import (
     CalibrationProblem,
     ConfigError,
     Observations,
-    PointingCovariance,
     Rig,
     RigFit,
     RimFit,
     RimPrior,
     SimulationSettings,
-    aim_with_covariance,
+    aim_at_floor,
     face_pixels,
     fit_rig,
-    pointing,
-    pointing_covariance,
     simulate_calibration,
-    with_mounting_sigma,
-    world_to_image,
 )
 from omnijax.config import Section, validate
 
@@ -309,19 +304,16 @@ def with_sigmas(rig: Rig, sigmas: dict[str, float]) -> Rig:
                        tuple(jnp.asarray(sigmas[n], float) for n in names))
 
 
-@eqx.filter_jit
-def _zoom_at(rig: Rig, r_f, theta_f, zero_sigma):
-    """Zoom, head width (px) and feasibility at foot points, the zero offsets' sigmas included."""
+@jax.jit
+def _zoom_at(rig: Rig, xy, zero_sigma):
+    """Zoom, head width (px) and feasibility at floor points ``xy`` (m), through the aim pipeline (a
+    detection there with the rig's default sigmas), the zero offsets' sigmas included."""
 
-    def one(r, t):
-        x = rig.input_mean(r, t)
-        cov = pointing_covariance(x, rig.input_sigma(), rig.omni.profile, "autodiff")
-        p = pointing(x, rig.omni.profile)
-        cov = PointingCovariance(cov=with_mounting_sigma(cov.cov, p.pan, p.tilt, *zero_sigma), valid=cov.valid)
-        a = aim_with_covariance(rig, x, cov)
-        return a.zoom.zoom, face_pixels(rig.foveal.lens, a.zoom.zoom, p.slant, rig.person.R_h), a.zoom.feasible
+    def one(p):
+        a = aim_at_floor(rig, p, None, zero_sigma=zero_sigma)
+        return a.zoom.zoom, face_pixels(rig.foveal.lens, a.zoom.zoom, a.pointing.slant, rig.person.R_h), a.zoom.feasible
 
-    return jax.vmap(one)(r_f, theta_f)
+    return jax.vmap(one)(xy)
 
 
 def face_widths(rig: Rig, zero_sigma: tuple[float, float] = (0.0, 0.0)) -> list[dict]:
@@ -331,8 +323,7 @@ def face_widths(rig: Rig, zero_sigma: tuple[float, float] = (0.0, 0.0)) -> list[
     pointing covariance (the geometry's nine inputs do not include them).
     """
     pts = np.array([p for p in ZOOM_POINTS_M if bool(rig.room.contains(*p))])
-    r_f, theta_f = rig.omni.to_polar(*world_to_image(rig.omni, pts[:, 0], pts[:, 1], np.zeros(len(pts))))
-    zoom, px, feasible = _zoom_at(rig, r_f, theta_f, jnp.asarray(zero_sigma, float))
+    zoom, px, feasible = _zoom_at(rig, jnp.asarray(pts, float), jnp.asarray(zero_sigma, float))
     return [{"floor_m": list(map(float, p)), "zoom": float(z), "face_px": float(f), "feasible": bool(ok)}
             for p, z, f, ok in zip(pts, zoom, px, feasible)]
 

@@ -29,25 +29,24 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from omnijax import (
     INPUT_NAMES,
+    Aim,
     Detector,
     Rig,
     adapt_background,
-    choose_zoom,
+    aim_at_floor,
     detect,
+    floor_from_detections,
     line_background,
-    pointing,
-    pointing_covariance_full,
     sector_mask,
 )
-from omnijax.geometry import floor_measurement, image_position, wrap_pi
-from omnijax.zoom import ZOOM_RULES as RULES
+from omnijax.geometry import wrap_pi
+from omnijax.zoom import ZOOM_RULES
 from runtime.realtime.config import LoopConfig
 from runtime.realtime.sources import Capture, Frame
 from runtime.realtime.targeting import TargetSelector, outside_dead_zone
@@ -56,34 +55,12 @@ from runtime.realtime.tracker import Tracker
 STAGES = ("capture", "detect", "track", "aim", "send", "log", "draw", "adapt")
 
 
-class Aimed(eqx.Module):
-    """The jitted aim's output: pointing, its covariance, and both rules' zoom."""
-
-    pan: jax.Array
-    tilt: jax.Array
-    slant: jax.Array
-    valid: jax.Array
-    cov: jax.Array
-    zoom: jax.Array  # (2,): paper, calibrated
-    fov_h: jax.Array
-    fov_v: jax.Array
-    probability: jax.Array
-    r_f: jax.Array
-    theta_f: jax.Array
-    cov_rt: jax.Array
-
-
 @jax.jit
 def perceive(detector: Detector, rig: Rig, frame, bg, lines):
-    """Detection (steps 1-6) and the detections' floor positions with covariances.
-
-    The detector's sigmas cover the profile's noise only (sigma_r_f is 0 for a clear person);
-    the rig's ``[detection]`` sigmas are their floor, for what the foot model misses.
-    """
+    """Detection (steps 1-6) and the detections' floor positions with covariances (the aim
+    pipeline's :func:`~omnijax.aim.floor_from_detections`, under its sigma rule)."""
     dets, trace = detect(detector, frame, bg, lines)
-    d = rig.detection
-    z, R = floor_measurement(rig, dets.r_f, dets.theta_f, jnp.maximum(dets.sigma_r_f, d.sigma_r_f),
-                             jnp.maximum(dets.sigma_theta_f, d.sigma_theta_f))
+    z, R = floor_from_detections(rig, dets.r_f, dets.theta_f, dets.sigma_r_f, dets.sigma_theta_f)
     return dets, trace, z, R
 
 
@@ -92,29 +69,6 @@ def update_background(detector: Detector, bg, frame, theta_map, dets, rate):
     """The background adapted where no person's sector is (``rate`` per call), and its polar lines."""
     bg = adapt_background(bg, frame, ~sector_mask(theta_map, dets), rate)
     return bg, line_background(detector, bg)
-
-
-@jax.jit
-def aim_at_floor(rig: Rig, xy, cov_xy) -> Aimed:
-    """Pan/tilt/zoom at the head above floor point ``xy`` whose covariance is ``cov_xy`` (2 x 2).
-
-    The floor estimate goes back to the image as (r_f, theta_f) with a full covariance, joins
-    the rig's calibration sigmas, and ``J Sigma J^T`` (autodiff) gives the pointing covariance.
-    """
-    rt, crt = image_position(rig, xy, cov_xy)
-    x = rig.input_mean(rt[0], rt[1])
-    sig = rig.input_sigma(0.0, 0.0)
-    cov9 = jnp.diag(sig**2).at[:2, :2].set(crt)
-    pc = pointing_covariance_full(x, cov9, rig.omni.profile)
-    p = pointing(x, rig.omni.profile)
-    choices = [choose_zoom(rig.foveal.lens, rule, pc.cov, p.distance, p.tilt, p.slant, rig.person.R_h,
-                           rig.p_contain) for rule in RULES]
-    return Aimed(
-        pan=p.pan, tilt=p.tilt, slant=p.slant, valid=p.valid, cov=pc.cov,
-        zoom=jnp.stack([c.zoom for c in choices]), fov_h=jnp.stack([c.fov_h for c in choices]),
-        fov_v=jnp.stack([c.fov_v for c in choices]), probability=jnp.stack([c.probability for c in choices]),
-        r_f=rt[0], theta_f=rt[1], cov_rt=crt,
-    )
 
 
 @dataclass
@@ -130,7 +84,7 @@ class Command:
     sd_tilt: float
     sent: bool
     t_predicted: float
-    aimed: Aimed | None = None
+    aimed: Aim | None = None
     floor_sd: np.ndarray | None = None  # sd of the predicted floor position (X, Y), m
 
 
@@ -236,7 +190,7 @@ class RealTimeLoop:
         dets = perceive(self.detector, self.rig, blank, self.bg, self.lines)[0]
         jax.block_until_ready(update_background(self.detector, self.bg, blank, self._theta_map, dets,
                                                 self.rig.detection.adapt_rate * self.cfg.adapt_every))
-        jax.block_until_ready(aim_at_floor(self.rig, jnp.array([1.0, 0.5]), 0.01 * jnp.eye(2)))
+        jax.block_until_ready(aim_at_floor(self.rig, jnp.array([1.0, 0.5]), 0.01 * jnp.eye(2), ZOOM_RULES))
         return dets
 
     # -- the loop -------------------------------------------------------------------------
@@ -357,14 +311,14 @@ class RealTimeLoop:
         for _ in range(2):
             t_predicted = frame.stamp + lead
             xp, Pp = target.predict(t_predicted, self.tracker.accel_sd)
-            aimed = aim_at_floor(self.rig, jnp.asarray(xp[:2]), jnp.asarray(Pp[:2, :2]))
-            lead = self._slew_time((float(aimed.pan), float(aimed.tilt), 1.0), zoom=False)
-        if not bool(aimed.valid):
+            aimed = aim_at_floor(self.rig, jnp.asarray(xp[:2]), jnp.asarray(Pp[:2, :2]), ZOOM_RULES)
+            lead = self._slew_time((float(aimed.pointing.pan), float(aimed.pointing.tilt), 1.0), zoom=False)
+        if not bool(aimed.pointing.valid):
             self.counts["invalid_geometry"] += 1
             return None
-        zooms = {rule: float(aimed.zoom[i]) for i, rule in enumerate(RULES)}
-        pan, tilt, zoom = float(aimed.pan), float(aimed.tilt), zooms[self.cfg.zoom_rule]
-        cov = np.asarray(aimed.cov)
+        zooms = {rule: float(aimed.zooms[rule].zoom) for rule in ZOOM_RULES}
+        pan, tilt, zoom = float(aimed.pointing.pan), float(aimed.pointing.tilt), zooms[self.cfg.zoom_rule]
+        cov = np.asarray(aimed.covariance.cov)
         sd_pan, sd_tilt = math.sqrt(cov[0, 0]), math.sqrt(cov[1, 1])
         new_target = self.selector.current != self._sent_track
         send = new_target or outside_dead_zone((pan, tilt, zoom), self.sent, sd_pan, sd_tilt, self.cfg.dead_zone_sd)

@@ -8,9 +8,11 @@ an omni frame with fresh sensor noise and runs the detector on it.
   configured one) and a fresh person per trial (H_p, R_h, clothing from the priors, as
   the paper's trials had different people stand at each mark), so the trial-to-trial
   spread comes from detection and the person, not calibration; the prediction is the
-  mean over trials of the pointing covariance with the detection sigmas (sigma_r_f,
-  sigma_theta_f of each detection) and the person priors (H_p, R_h), calibration sigmas
-  zero. One person under sensor noise alone hardly moves the estimate (0-0.3 px).
+  mean over trials of the pointing covariance with each detection's sigmas under the aim
+  pipeline's sigma rule (the detector's sigma_r_f, sigma_theta_f floored by the rig's
+  ``[detection]`` ones, as the loop has them) and the person priors (H_p, R_h),
+  calibration sigmas zero. One person under sensor noise alone hardly moves the estimate
+  (0-0.3 px).
 - Table 1 with full propagation: a fresh true rig (:func:`omnijax.draw_true_rig`) and a
   fresh person (H_p, R_h, clothing) per trial; what is compared is the pointing error
   (computed from the detection with the configured rig, minus the truth), against the
@@ -18,7 +20,8 @@ an omni frame with fresh sensor noise and runs the detector on it.
 - Rates: false alarms on empty frames (per radial line against x_f, per frame against
   the thresholds' predicted rate) and misses over all person trials (against x_m).
 - Containment: for the fresh-rig trials, whether the true head disc lies in the foveal
-  frame at the zoom each rule chooses for each p_contain.
+  frame at the zoom each rule chooses for each p_contain, the detection aimed at through
+  the aim pipeline (:func:`omnijax.aim_detection`), as the loop aims.
 """
 
 from __future__ import annotations
@@ -36,14 +39,15 @@ from scipy.stats import beta
 
 from omnijax import (
     Rig,
+    aim_detection,
+    aim_from_image,
     build_detector,
-    choose_zoom,
     detect,
+    detection_sigmas,
     learn_background,
     line_background,
     point_image_radius,
     pointing,
-    pointing_covariance,
 )
 from omnijax.detection import Background, Detections, Detector, LineBackground, line_change
 from omnijax.geometry import wrap_2pi, wrap_pi
@@ -59,7 +63,7 @@ from omnijax.world import (
     render_frame,
     walkable,
 )
-from omnijax.zoom import ZOOM_RULES as RULES
+from omnijax.zoom import ZOOM_RULES
 
 #: Containment is measured at these p_contain, for both zoom rules.
 P_CONTAIN = (0.9, 0.95, 0.99)
@@ -360,26 +364,40 @@ def binomial(k: int, n: int, level: float = 0.95) -> dict:
     return {"rate": k / n if n else None, "count": int(k), "n": int(n), "lower": lo, "upper": hi, "level": level}
 
 
+def fixed_rig(rig: Rig) -> Rig:
+    """``rig`` with its calibration sigmas (H_o, H_f, D_c, theta_c, r_m) zero: Table 1's prediction for
+    one fixed rig, where only the detection and, since every trial is a different person, the person
+    priors (H_p, R_h) vary."""
+    s = rig.sigmas
+    return eqx.tree_at(lambda r: (r.sigmas.H_o, r.sigmas.H_f, r.sigmas.D_c, r.sigmas.theta_c, r.sigmas.r_m), rig,
+                       tuple(jnp.zeros_like(v) for v in (s.H_o, s.H_f, s.D_c, s.theta_c, s.r_m)))
+
+
 @jax.jit
-def _pointing_stats(rig: Rig, r_f, theta_f, sigma_r_f, sigma_theta_f, mask):
-    """sin pan, tan tilt and their predicted variances per trial; ``mask`` selects the sigmas (9)."""
+def _pointing_stats(rig: Rig, r_f, theta_f, sigma_r_f, sigma_theta_f):
+    """sin pan, tan tilt and their predicted variances per detection, through the aim pipeline (the
+    sigma rule included)."""
     def one(r, t, sr, st):
-        x = rig.input_mean(r, t)
-        p = pointing(x, rig.omni.profile)
-        cov = pointing_covariance(x, rig.input_sigma(sr, st) * mask, rig.omni.profile, "autodiff")
-        return p.sin_pan, p.tan_tilt, cov.var_sin_pan, cov.var_tan_tilt
+        a = aim_detection(rig, r, t, sr, st)
+        return a.pointing.sin_pan, a.pointing.tan_tilt, a.covariance.var_sin_pan, a.covariance.var_tan_tilt
 
     return jax.vmap(one)(r_f, theta_f, sigma_r_f, sigma_theta_f)
+
+
+@jax.jit
+def _pointing_stats_given(rig: Rig, r_f, theta_f, sd_r_f, sd_theta_f):
+    """As :func:`_pointing_stats` with the foot's standard deviations taken as given (a measured
+    spread, not a detector's sigmas: no sigma rule)."""
+    def one(r, t, sr, st):
+        a = aim_from_image(rig, r, t, jnp.diag(jnp.stack([sr**2, st**2])))
+        return a.covariance.var_sin_pan, a.covariance.var_tan_tilt
+
+    return jax.vmap(one)(r_f, theta_f, sd_r_f, sd_theta_f)
 
 
 def _true_pointing(profile, x_true):
     p = jax.vmap(lambda x: pointing(x, profile))(jnp.asarray(x_true))
     return np.asarray(p.sin_pan), np.asarray(p.tan_tilt)
-
-
-#: Which of the 9 inputs' sigmas Table 1's fixed-rig prediction keeps: the detection (r_f, theta_f)
-#: and, since every trial is a different person, the person priors (H_p, R_h); no calibration.
-DETECTION_ONLY = np.array([1.0, 1.0, 0, 0, 0, 0, 0, 1.0, 1.0])
 
 
 def table_row(rig: Rig, name: str, foot, t: Trials, detection_only: bool) -> dict:
@@ -389,7 +407,8 @@ def table_row(rig: Rig, name: str, foot, t: Trials, detection_only: bool) -> dic
     with the configured rig, minus the truth); with the rig and person fixed the truth is
     fixed and this is the spread of the computed values, the paper's Table 1. Full
     propagation rows also report the error's mean square (bias included).
-    ``diagnosis`` holds the detector's sigmas against the spread of its errors, and the
+    ``diagnosis`` holds the detector's sigmas (and those the sigma rule hands to the
+    covariance, ``*_used``) against the spread of its errors, and the
     prediction with the measured detection spread in place of the detector's sigmas
     (which separates the propagation from the detector's sigma estimates).
     """
@@ -397,8 +416,8 @@ def table_row(rig: Rig, name: str, foot, t: Trials, detection_only: bool) -> dic
     f = np.asarray(d.found, bool)
     r_f, th, s_r, s_th = (np.asarray(a)[f] for a in (d.r_f, d.theta_f, d.sigma_r_f, d.sigma_theta_f))
     x_true = np.asarray(t.x_true)[f]
-    mask = jnp.asarray(DETECTION_ONLY if detection_only else np.ones(9))
-    sp, tt, vsp, vtt = (np.asarray(a) for a in _pointing_stats(rig, *map(jnp.asarray, (r_f, th, s_r, s_th)), mask))
+    pred_rig = fixed_rig(rig) if detection_only else rig
+    sp, tt, vsp, vtt = (np.asarray(a) for a in _pointing_stats(pred_rig, *map(jnp.asarray, (r_f, th, s_r, s_th))))
     true_sp, true_tt = _true_pointing(rig.omni.profile, x_true)
     e_r, e_th = r_f - x_true[:, 0], wrap_pi(th - x_true[:, 1])
     if detection_only:  # the trial-to-trial spread of the detection
@@ -406,8 +425,8 @@ def table_row(rig: Rig, name: str, foot, t: Trials, detection_only: bool) -> dic
     else:  # its error about the truth, bias included
         alt_r = np.full_like(r_f, np.sqrt(np.mean(e_r**2)))
         alt_th = np.full_like(th, np.sqrt(np.mean(np.asarray(e_th) ** 2)))
-    alt = _pointing_stats(rig, *map(jnp.asarray, (r_f, th, alt_r, alt_th)), mask)
-    _, _, alt_sp, alt_tt = (np.asarray(a) for a in alt)
+    alt = _pointing_stats_given(pred_rig, *map(jnp.asarray, (r_f, th, alt_r, alt_th)))
+    alt_sp, alt_tt = (np.asarray(a) for a in alt)
     fo = rig.foveal
     row = {"position": name, "foot_m": [float(v) for v in foot], "trials": int(f.sum()), "missed": int((~f).sum()),
            "distance_to_ptz_m": float(np.hypot(foot[0] - fo.D_c * np.cos(fo.theta_c),
@@ -428,8 +447,10 @@ def table_row(rig: Rig, name: str, foot, t: Trials, detection_only: bool) -> dic
             row[f"emp_mse_{q}"] = ms
             row[f"emp_mse_{q}_se"] = ms_se
             row[f"ratio_mse_{q}"] = p / ms if ms > 0 else None
+    used_r, used_th = (np.asarray(a) for a in detection_sigmas(rig, jnp.asarray(s_r), jnp.asarray(s_th)))
     row["diagnosis"] = {
-        "sigma_r_f_px": float(np.mean(s_r)), "r_f_sd_px": float(np.std(r_f, ddof=1)),
+        "sigma_r_f_px": float(np.mean(s_r)), "sigma_r_f_used_px": float(np.mean(used_r)),
+        "sigma_theta_f_used_rad": float(np.mean(used_th)), "r_f_sd_px": float(np.std(r_f, ddof=1)),
         "r_f_error_rms_px": float(np.sqrt(np.mean(e_r**2))), "r_f_bias_px": float(np.mean(e_r)),
         "sigma_theta_f_rad": float(np.mean(s_th)), "theta_f_sd_rad": float(np.std(np.asarray(e_th), ddof=1)),
         "theta_f_error_rms_rad": float(np.sqrt(np.mean(np.asarray(e_th) ** 2))),
@@ -438,16 +459,21 @@ def table_row(rig: Rig, name: str, foot, t: Trials, detection_only: bool) -> dic
     return row
 
 
-@eqx.filter_jit
-def _contained(rig: Rig, t: Trials, rule: str, p_contain):
-    """Whether the true head disc lies in the foveal frame at the zoom ``rule`` chooses for ``p_contain``."""
+@jax.jit
+def _contained(rig: Rig, t: Trials, p_contain):
+    """Per rule of :data:`~omnijax.zoom.ZOOM_RULES` (last axis): whether the true head disc lies in the
+    foveal frame at the zoom the rule chooses for ``p_contain``, the face width (px), the predicted
+    probability and the zoom. The detection goes through the aim pipeline, as in the loop."""
+    rig = eqx.tree_at(lambda r: r.p_contain, rig, jnp.asarray(p_contain, float))
+
     def one(det, head, R_h, true_rig):
-        x = rig.input_mean(det.r_f, det.theta_f)
-        p = pointing(x, rig.omni.profile)
-        cov = pointing_covariance(x, rig.input_sigma(det.sigma_r_f, det.sigma_theta_f), rig.omni.profile, "autodiff")
-        z = choose_zoom(rig.foveal.lens, rule, cov.cov, p.distance, p.tilt, p.slant, rig.person.R_h, p_contain)
-        view = head_in_view(true_rig, p.pan, p.tilt, z.zoom, head, R_h)
-        return view.inside, view.face_px, z.probability, z.zoom
+        a = aim_detection(rig, det.r_f, det.theta_f, det.sigma_r_f, det.sigma_theta_f, ZOOM_RULES)
+        out = []
+        for rule in ZOOM_RULES:
+            z = a.zooms[rule]
+            view = head_in_view(true_rig, a.pointing.pan, a.pointing.tilt, z.zoom, head, R_h)
+            out.append((view.inside, view.face_px, z.probability, z.zoom))
+        return tuple(jnp.stack(v, -1) for v in zip(*out))
 
     return jax.vmap(one)(t.det, t.head, t.R_h, t.true_rig)
 
@@ -457,10 +483,11 @@ def containment(rig: Rig, t: Trials, p_contain: tuple[float, ...] = P_CONTAIN) -
     its 95 % interval, the mean predicted probability, the median zoom and face width (px)."""
     found = np.asarray(t.det.found, bool)
     sub = jax.tree.map(lambda a: jnp.asarray(np.asarray(a)[found]), t)
+    by_p = {p: [np.asarray(a) for a in _contained(rig, sub, p)] for p in p_contain}
     out = []
-    for rule in RULES:
+    for i, rule in enumerate(ZOOM_RULES):
         for p in p_contain:
-            inside, face, prob, zoom = (np.asarray(a) for a in _contained(rig, sub, rule, jnp.asarray(p)))
+            inside, face, prob, zoom = (a[:, i] for a in by_p[p])
             b = binomial(int(inside.sum()), inside.size)
             out.append({"p_contain": p, "rule": rule, "rate": b["rate"], "trials": b["n"], "lower": b["lower"],
                         "upper": b["upper"], "predicted_mean": float(prob.mean()),

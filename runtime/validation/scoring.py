@@ -117,7 +117,8 @@ class DemoScorer:
             p = (1 - w) * self.positions[k0, person] + w * self.positions[k1, person]
             head, R_h = np.r_[p, self.head_z[person]], float(self.R_h[person])
         aimed = command.aimed
-        prob = np.asarray(aimed.probability, float) if aimed is not None else np.full(len(RULES), np.nan)
+        prob = (np.array([float(aimed.zooms[r].probability) for r in RULES]) if aimed is not None
+                else np.full(len(RULES), np.nan))
         self.batch.append((command.pan, command.tilt, [command.zooms[r] for r in RULES], head, R_h, prob))
         if len(self.batch) == BATCH:
             self._score_batch()
