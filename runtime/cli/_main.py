@@ -25,6 +25,10 @@ and every uncertainty is propagated so that the zoom is the largest that still
 keeps the head in frame with probability p_contain.
 
 Rig files are TOML (see configs/paper.toml for every key, with units).
+
+Exit codes: 0 done; 2 bad input (a config, file, flag or port), with one line on
+stderr naming what was wrong, found before any work and leaving nothing behind;
+130 interrupted (Ctrl-C or SIGTERM, at any moment; nothing half-written).
 """
 
 
