@@ -242,6 +242,8 @@ Pair = Annotated[list[float], Len(2, 2)]
 Size = Annotated[list[Side], Len(2, 2)]
 Point = Annotated[list[Coordinate], Len(2, 2)]
 Polygon = Annotated[list[Point], Len(3)]
+#: How far (m) outside the room's outline a camera may be: mounted on a wall.
+WALL_TOLERANCE_M = 0.5
 #: Least floor (m^2) a room's outline must enclose: a person can stand in it.
 MIN_ROOM_AREA_M2 = 1.0
 #: Most magnification a PTZ lens table may give.
@@ -262,6 +264,16 @@ def _area(poly: list[list[float]]) -> float:
     """Area (m^2) of a polygon by the shoelace formula."""
     x, y = np.asarray(poly, float).T
     return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+
+def _outside_by(poly: list[list[float]], x: float, y: float) -> float:
+    """How far (m) the floor point (x, y) lies outside the polygon: 0 inside, else its distance to the edges."""
+    if bool(_in_polygon(jnp.asarray(poly, dtype=float), x, y)):
+        return 0.0
+    a = np.asarray(poly, float)
+    e = np.roll(a, -1, axis=0) - a
+    t = np.clip(((np.array([x, y]) - a) * e).sum(1) / np.maximum((e * e).sum(1), 1e-300), 0.0, 1.0)
+    return float(np.hypot(*(a + t[:, None] * e - np.array([x, y])).T).min())
 
 
 class OmniSection(Section):
@@ -469,6 +481,22 @@ class RigFile(Section):
             raise ValueError(
                 f"layout.H_f bounds {self.layout.H_f} reach above the omni camera ({top:g} m); the PTZ's "
                 "centre cannot be above it"
+            )
+        outline = self.room.outline
+        off = _outside_by(outline, 0.0, 0.0)
+        if off > WALL_TOLERANCE_M:
+            raise ValueError(
+                f"the omni camera's axis (the origin of room.outline) lies {off:.3g} m outside the room's outline; "
+                f"expected it over the room (within {WALL_TOLERANCE_M:g} m of a wall): it sees the room from above"
+            )
+        theta = math.radians(self.foveal.theta_c_deg)
+        D_c = self.foveal.D_c
+        off = _outside_by(outline, D_c * math.cos(theta), D_c * math.sin(theta))
+        if off > WALL_TOLERANCE_M:
+            raise ValueError(
+                f"foveal.D_c = {D_c:g} m at theta_c_deg = {self.foveal.theta_c_deg:g} puts the PTZ {off:.3g} m "
+                f"outside the room's outline; expected it in the room or on a wall (within {WALL_TOLERANCE_M:g} m): "
+                "from outside, the walls hide the room"
             )
         if self.layout.face_target_px > self.foveal.image_size[0]:
             raise ValueError(

@@ -93,6 +93,10 @@ def test_absurd_magnitudes_are_refused_with_the_unit(key, expect):
     ({"room.outline": [[-2e6, 0.0], [1.0, 0.0], [2.0, 1.0]]}, "room.outline.0.0: expected metres in [-1000, 1000]"),
     ({"person.shoulder_width": 2.0}, "shoulder_width = 2 m must be less than H_p = 1.75 m"),
     ({"layout.face_target_px": 5000.0}, "wider than the PTZ's image (foveal.image_size 640 px)"),
+    ({"foveal.D_c": 1000.0}, "puts the PTZ 997 m outside the room's outline"),
+    ({"foveal.D_c": 4.2}, "puts the PTZ 0.9 m outside the room's outline"),
+    ({"room.outline": [[10.0, 10.0], [20.0, 10.0], [20.0, 20.0], [10.0, 20.0]], "room.exclude": []},
+     "the omni camera's axis (the origin of room.outline) lies 14.1 m outside"),
 ])
 def test_impossible_but_finite_rigs_say_why(changes, expect):
     assert expect in refused(changes)
@@ -117,6 +121,12 @@ def test_a_rig_that_cannot_see_its_room_is_refused_on_loading(tmp_path, changes,
         load_rig(path)
     msg = str(err.value)
     assert msg.startswith(f"{path}: ") and expect in msg and "nobody could be detected" in msg
+
+
+def test_cameras_on_a_wall_are_allowed():
+    d = paper()
+    d["foveal"]["D_c"] = 3.6  # 0.3 m beyond the outline at x = 3.3: on the wall
+    parse_rig(d, source="wall.toml")
 
 
 def test_sigma_r_m_is_required_and_exclude_and_rule_are_optional():
