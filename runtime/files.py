@@ -1,12 +1,21 @@
-"""Reading TOML files from disk (rigs, scenarios, PTZ profiles): the one place they are read and parsed."""
+"""Reading files from disk (rigs, scenarios, PTZ profiles, observations): the one place they are read and parsed.
+
+Every such file is a regular file of at most :data:`MAX_FILE_BYTES`, in UTF-8; anything else
+(a directory, a device, UTF-16, random bytes) is one line naming the file and what was
+expected, raised as the caller's error type (exit code 2 from the command line).
+"""
 
 from __future__ import annotations
 
+import codecs
+import json
+import stat
 import tomllib
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from omnijax.config import ConfigError, Rig, parse_rig
+from omnijax.detection import polar_range
 
 if TYPE_CHECKING:
     from omnijax.world import Scenario
@@ -28,18 +37,59 @@ def scenario_path(spec: str | Path) -> Path:
     raise ConfigError(f"{spec}: no such scenario file, nor a scenario name ({names})")
 
 
-def read_toml(path: str | Path, kind: str = "config file", error: type[Exception] = ConfigError) -> dict:
-    """Parse a TOML file; a missing or malformed file is one line (``error``) naming the file as a ``kind``."""
+#: Largest file read as a rig, scenario, profile, observations or calibration file (bytes).
+MAX_FILE_BYTES = 16 * 2**20
+
+
+def read_bytes(path: str | Path, kind: str = "config file", error: type[Exception] = ConfigError) -> bytes:
+    """The bytes of a regular file; a missing, unreadable or oversized file, a directory or a device is
+    one line (``error``) naming the file as a ``kind``."""
     path = Path(path)
     try:
-        with path.open("rb") as fh:
-            return tomllib.load(fh)
+        st = path.stat()
+        if stat.S_ISDIR(st.st_mode):
+            raise error(f"{path}: is a directory, expected a {kind}")
+        if not stat.S_ISREG(st.st_mode):
+            raise error(f"{path}: not a regular file, expected a {kind}")
+        if st.st_size > MAX_FILE_BYTES:
+            raise error(f"{path}: {st.st_size} bytes, expected a {kind} of at most {MAX_FILE_BYTES // 2**20} MB")
+        return path.read_bytes()
     except FileNotFoundError:
         raise error(f"{path}: no such {kind}") from None
-    except IsADirectoryError:
-        raise error(f"{path}: is a directory, expected a {kind} (TOML)") from None
+    except OSError as exc:
+        raise error(f"{path}: cannot read the {kind}: {exc.strerror or exc}") from None
+
+
+def read_text(path: str | Path, kind: str = "config file", error: type[Exception] = ConfigError) -> str:
+    """A text file in UTF-8 (a UTF-8 byte-order mark is skipped); UTF-16 or other bytes are one line
+    (``error``) saying where the first byte that is not UTF-8 is."""
+    data = read_bytes(path, kind, error)
+    if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        raise error(f"{path}: UTF-16 text, expected a {kind} in UTF-8 (save it as UTF-8)")
+    try:
+        return data.removeprefix(codecs.BOM_UTF8).decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        raise error(f"{path}: not UTF-8 text (byte 0x{data[exc.start]:02x} on line {line}), "
+                    f"expected a {kind} in UTF-8") from None
+
+
+def read_toml(path: str | Path, kind: str = "config file", error: type[Exception] = ConfigError) -> dict:
+    """Parse a TOML file (see :func:`read_text`); a malformed file is one line (``error``) naming it."""
+    text = read_text(path, kind, error)
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise error(f"{path}: not valid TOML: {exc}") from None
+
+
+def read_json(path: str | Path, kind: str, error: type[Exception] = ConfigError):
+    """Parse a JSON file (see :func:`read_text`); a malformed file is one line (``error``) naming it."""
+    text = read_text(path, kind, error)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise error(f"{path}: not valid JSON: {exc}") from None
 
 
 def load_rig(path: str | Path, overrides: dict[str, dict] | None = None) -> Rig:
@@ -52,8 +102,8 @@ def load_rig(path: str | Path, overrides: dict[str, dict] | None = None) -> Rig:
     path = Path(path)
     base = path.parent
 
-    def read_text(name: str) -> str:
-        return (base / name).read_text()
+    def calib_text(name: str) -> str:
+        return read_text(base / name, "calibration file")
 
     data = read_toml(path)
     source = str(path)
@@ -62,7 +112,12 @@ def load_rig(path: str | Path, overrides: dict[str, dict] | None = None) -> Rig:
             if keys:
                 data[section] = {**data.get(section, {}), **keys}
                 source = f"{path} (with command-line overrides)"
-    return parse_rig(data, source=source, read_text=read_text)
+    rig = parse_rig(data, source=source, read_text=calib_text)
+    try:
+        polar_range(rig)  # a rig that cannot see its own room is refused here, before any work
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+    return rig
 
 
 def load_scenario(path: str | Path, rig_overrides: dict[str, dict] | None = None) -> tuple[Rig, Scenario]:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib
+import math
 import typing
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -62,6 +63,18 @@ class Option:
     flag: str | None = None
 
 
+def finite_float(text: str) -> float:
+    """The argparse type of every number flag: a finite float (``nan``, ``inf`` and non-numbers are
+    refused with ``argument --FLAG: expected a finite number, got 'nan'``, exit code 2)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
 def setting(default: Any, help: str, *, unit: str | None = None, metavar: str | None = None,
             choices: Sequence[str] | None = None, ge: float | None = None, gt: float | None = None,
             flag: str | None = None) -> Any:
@@ -102,7 +115,8 @@ def add_options(parser: argparse.ArgumentParser, cls) -> dict[str, argparse.Acti
         text = opt.help
         if f.default is not None:
             text += f" (default {f.default:g})" if isinstance(f.default, float) else f" (default {f.default})"
-        actions[f.name] = parser.add_argument(flag_of(f), dest=f.name, type=kind, default=f.default,
+        actions[f.name] = parser.add_argument(flag_of(f), dest=f.name, type=finite_float if kind is float else kind,
+                                              default=f.default,
                                               choices=opt.choices, metavar=opt.metavar or f.name.upper(), help=text)
     return actions
 

@@ -1,7 +1,8 @@
 """Typed rig configuration: the TOML schema, validated once at the edge, and the PyTrees kernels take.
 
 ``Section``, ``validate`` and ``one_line_error`` are the schema kit every file format of
-omnijax uses (rig, scenario, PTZ profile, calibration observations).
+omnijax uses (rig, scenario, PTZ profile, calibration observations), with the bounded field
+types (``Metres``, ``Coordinate``, ``Degrees``, ``within`` ...) that say what a number can be.
 """
 
 from ._config import (
@@ -19,10 +20,16 @@ from ._config import (
     parse_rig as parse_rig,
 )
 from ._schema import (
+    MAX_LENGTH_M as MAX_LENGTH_M,
     ConfigError as ConfigError,
+    Coordinate as Coordinate,
+    Degrees as Degrees,
+    Metres as Metres,
     NonNeg as NonNeg,
     Pos as Pos,
+    PosMetres as PosMetres,
     Section as Section,
     one_line_error as one_line_error,
     validate as validate,
+    within as within,
 )

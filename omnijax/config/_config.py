@@ -24,7 +24,22 @@ from jaxtyping import Array, Float
 from pydantic import Field, model_validator
 
 from ..camera import PROFILES, OCamCalib, OmniCamera, parse_ocamcalib
-from ._schema import ConfigError, NonNeg, Pos, Section, validate
+from ._schema import (
+    MAX_LENGTH_M,
+    ConfigError,
+    Coordinate,
+    Degrees,
+    Metres,
+    NonNegPixels,
+    Pixels,
+    PosMetres,
+    PosSigmaDegrees,
+    Section,
+    Side,
+    SigmaDegrees,
+    validate,
+    within,
+)
 
 # --------------------------------------------------------------------------------------
 # Kernel-side types
@@ -224,21 +239,52 @@ class Rig(eqx.Module):
 
 Prob = Annotated[float, Field(gt=0, lt=1)]
 Pair = Annotated[list[float], Len(2, 2)]
-PosPair = Annotated[list[Annotated[float, Field(gt=0)]], Len(2, 2)]
-Size = Annotated[list[Annotated[int, Field(gt=0)]], Len(2, 2)]
-Point = Annotated[list[float], Len(2, 2)]
+Size = Annotated[list[Side], Len(2, 2)]
+Point = Annotated[list[Coordinate], Len(2, 2)]
 Polygon = Annotated[list[Point], Len(3)]
+#: How far (m) outside the room's outline a camera may be: mounted on a wall.
+WALL_TOLERANCE_M = 0.5
+#: Least floor (m^2) a room's outline must enclose: a person can stand in it.
+MIN_ROOM_AREA_M2 = 1.0
+#: Most magnification a PTZ lens table may give.
+MAX_ZOOM = 1000.0
+Zoom = Annotated[float, within(1.0, MAX_ZOOM, "a zoom factor", why="no PTZ lens magnifies more")]
+MetrePair = Annotated[list[Metres], Len(2, 2)]
+PanLimits = Annotated[list[Degrees], Len(2, 2)]
+TiltLimits = Annotated[list[Annotated[float, within(-90.0, 90.0, "degrees",
+                                                    why="straight down to straight up")]], Len(2, 2)]
+#: Largest person contrast (d^2 non-centrality per pixel): two 8-bit colours' chromaticities, at the
+#: least noise a sensor has, are never further apart.
+MAX_CONTRAST = 1e6
+#: A bright 8-bit image's whole range, in grey levels: the most a sensor's noise sigma can be.
+MAX_GREY = 255.0
+
+
+def _area(poly: list[list[float]]) -> float:
+    """Area (m^2) of a polygon by the shoelace formula."""
+    x, y = np.asarray(poly, float).T
+    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+
+def _outside_by(poly: list[list[float]], x: float, y: float) -> float:
+    """How far (m) the floor point (x, y) lies outside the polygon: 0 inside, else its distance to the edges."""
+    if bool(_in_polygon(jnp.asarray(poly, dtype=float), x, y)):
+        return 0.0
+    a = np.asarray(poly, float)
+    e = np.roll(a, -1, axis=0) - a
+    t = np.clip(((np.array([x, y]) - a) * e).sum(1) / np.maximum((e * e).sum(1), 1e-300), 0.0, 1.0)
+    return float(np.hypot(*(a + t[:, None] * e - np.array([x, y])).T).min())
 
 
 class OmniSection(Section):
     model: Literal["paraboloid", "equidistant", "equisolid", "ocamcalib"]
-    H_o: Pos = Field(description="height of the mirror focus / lens centre above the floor, m")
-    sigma_H_o: NonNeg
+    H_o: PosMetres = Field(description="height of the mirror focus / lens centre above the floor, m")
+    sigma_H_o: Metres
     image_size: Size | None = Field(None, description="width, height in px (ocamcalib: from the file)")
     center: Pair | None = Field(None, description="image centre x_c, y_c in px (ocamcalib: from the file)")
-    r_m: Pos | None = Field(None, description="horizon radius (phi = 90 deg) in px (ocamcalib: from the file)")
-    sigma_r_m: NonNeg = 0.0
-    rim: Pos | None = Field(None, description="radius of the usable image circle, px")
+    r_m: Pixels | None = Field(None, description="horizon radius (phi = 90 deg) in px (ocamcalib: from the file)")
+    sigma_r_m: NonNegPixels = Field(description="calibration sigma of r_m, px")
+    rim: Pixels | None = Field(None, description="radius of the usable image circle, px")
     fov_deg: Annotated[float, Field(gt=0, le=360)] | None = Field(
         None, description="fisheye field of view; sets the rim when `rim` is absent"
     )
@@ -259,7 +305,7 @@ class OmniSection(Section):
 
 
 class LensSection(Section):
-    zoom: Annotated[list[Annotated[float, Field(ge=1)]], Len(2)]
+    zoom: Annotated[list[Zoom], Len(2)]
     fov_h_deg: Annotated[list[Annotated[float, Field(gt=0, lt=180)]], Len(2)]
 
     @model_validator(mode="after")
@@ -274,16 +320,16 @@ class LensSection(Section):
 
 
 class FovealSection(Section):
-    D_c: NonNeg = Field(description="floor distance from the omni axis to the PTZ, m")
-    sigma_D_c: NonNeg
-    theta_c_deg: float = Field(description="azimuth of the PTZ around the omni axis, deg")
-    sigma_theta_c_deg: NonNeg
-    H_f: Pos = Field(description="height of the PTZ's rotation centre, m")
-    sigma_H_f: NonNeg
-    pan_limits_deg: Pair
-    tilt_limits_deg: Pair
+    D_c: Metres = Field(description="floor distance from the omni axis to the PTZ, m")
+    sigma_D_c: Metres
+    theta_c_deg: Degrees = Field(description="azimuth of the PTZ around the omni axis, deg")
+    sigma_theta_c_deg: SigmaDegrees
+    H_f: PosMetres = Field(description="height of the PTZ's rotation centre, m")
+    sigma_H_f: Metres
+    pan_limits_deg: PanLimits
+    tilt_limits_deg: TiltLimits
     image_size: Size
-    zoom_range: PosPair
+    zoom_range: Annotated[list[Zoom], Len(2, 2)]
     lens: LensSection
 
     @model_validator(mode="after")
@@ -292,6 +338,8 @@ class FovealSection(Section):
             lo, hi = getattr(self, key)
             if not lo < hi:
                 raise ValueError(f"{key} must be [low, high] with low < high")
+        if self.pan_limits_deg[1] - self.pan_limits_deg[0] > 360:
+            raise ValueError(f"pan_limits_deg {self.pan_limits_deg} span more than one turn (360 deg)")
         if self.zoom_range[0] < self.lens.zoom[0] or self.zoom_range[1] > self.lens.zoom[-1]:
             raise ValueError(
                 f"zoom_range {self.zoom_range} must lie inside the lens table "
@@ -301,30 +349,37 @@ class FovealSection(Section):
 
 
 class PersonSection(Section):
-    H_p: Pos = Field(description="person height, m")
-    sigma_H_p: NonNeg
-    R_h: Pos = Field(description="head radius, m")
-    sigma_R_h: NonNeg
-    shoulder_width: Pos
+    H_p: PosMetres = Field(description="person height, m")
+    sigma_H_p: Metres
+    R_h: PosMetres = Field(description="head radius, m")
+    sigma_R_h: Metres
+    shoulder_width: PosMetres
 
     @model_validator(mode="after")
     def _head(self):
         if self.R_h >= self.H_p / 2:
             raise ValueError("R_h must be less than half of H_p")
+        if self.shoulder_width >= self.H_p:
+            raise ValueError(f"shoulder_width = {self.shoulder_width:g} m must be less than H_p = {self.H_p:g} m "
+                             "(a person is taller than wide)")
         return self
 
 
 class DetectionSection(Section):
-    sensor_sigma: Pos = Field(description="sensor noise per channel, grey levels")
+    sensor_sigma: Annotated[float, within(0.0, MAX_GREY, "grey levels", open_low=True,
+                                          why="an 8-bit image's whole range")] = Field(
+        description="sensor noise per channel, grey levels")
     x_f: Prob = Field(description="false-alarm probability of a background radial line (eq 10)")
     x_m: Prob = Field(description="miss rate per person of contrast >= c_min")
-    sigma_r_f: Pos = Field(description="floor (and default) of a detection's sigma of the foot radius, px")
-    sigma_theta_f_deg: Pos = Field(
+    sigma_r_f: Pixels = Field(description="floor (and default) of a detection's sigma of the foot radius, px")
+    sigma_theta_f_deg: PosSigmaDegrees = Field(
         description="floor (and default) of a detection's sigma of the foot azimuth, deg")
-    c_min: Pos = Field(4.0, description="smallest person contrast (non-centrality per pixel) x_m holds for")
+    c_min: Annotated[float, within(0.0, MAX_CONTRAST, "a non-centrality per pixel", open_low=True,
+                                   why="more than two 8-bit colours' chromaticities can differ by")] = Field(
+        4.0, description="smallest person contrast (non-centrality per pixel) x_m holds for")
     n_theta: Annotated[int, Field(ge=36, le=4096)] = Field(360, description="radial lines")
-    min_floor_radius: NonNeg = Field(0.3, description="floor radius under the camera left out, m")
-    r_max: Pos | None = Field(None, description="outer radius of the polar sampling, px (default: room)")
+    min_floor_radius: Metres = Field(0.3, description="floor radius under the camera left out, m")
+    r_max: Pixels | None = Field(None, description="outer radius of the polar sampling, px (default: room)")
     max_people: Annotated[int, Field(ge=1, le=64)] = 8
     background_frames: Annotated[int, Field(ge=3, le=1000)] = 30
     adapt_rate: Annotated[float, Field(ge=0, lt=1)] = Field(0.02, description="background adaptation")
@@ -339,7 +394,14 @@ class ZoomSection(Section):
 
 class RoomSection(Section):
     outline: Polygon = Field(description="floor outline polygon [[x, y], ...] in m")
-    exclude: list[Polygon] = Field(default_factory=list, description="excluded floor zones")
+    exclude: list[Polygon] = Field(default_factory=list, description="excluded floor zones (optional, default none)")
+
+    @model_validator(mode="after")
+    def _areas(self):
+        if _area(self.outline) < MIN_ROOM_AREA_M2:
+            raise ValueError(f"outline encloses {_area(self.outline):.3g} m^2 of floor; expected a room "
+                             f"(at least {MIN_ROOM_AREA_M2:g} m^2: its corners not all on one line)")
+        return self
 
 
 #: Landscape cells per varied variable when ``[layout] landscape`` is not given (by number varied).
@@ -354,13 +416,14 @@ class LayoutSection(Section):
     )
     objective: Literal["face_px", "variance"] = "face_px"
     statistic: Literal["mean", "worst"] = "mean"
-    D_c: Pair | None = Field(None, description="bounds of D_c, m")
-    H_f: Pair | None = Field(None, description="bounds of H_f, m")
-    theta_c_deg: Pair | None = Field(None, description="bounds of theta_c, deg")
-    H_o: Pair | None = Field(None, description="bounds of H_o, m (required to search H_o)")
+    D_c: MetrePair | None = Field(None, description="bounds of D_c, m")
+    H_f: MetrePair | None = Field(None, description="bounds of H_f, m")
+    theta_c_deg: Annotated[list[Degrees], Len(2, 2)] | None = Field(None, description="bounds of theta_c, deg")
+    H_o: MetrePair | None = Field(None, description="bounds of H_o, m (required to search H_o)")
     grid_step: Annotated[float, Field(ge=0.02, le=2.0)] = Field(0.25, description="floor grid spacing, m")
-    near_radius: Annotated[float, Field(ge=0.1)] = Field(1.0, description="left out around the PTZ's foot, m")
-    face_target_px: Pos = Field(60.0, description="face width that bounds the operational region, px")
+    near_radius: Annotated[float, Field(ge=0.1, le=MAX_LENGTH_M)] = Field(
+        1.0, description="left out around the PTZ's foot, m")
+    face_target_px: Pixels = Field(60.0, description="face width that bounds the operational region, px")
     starts: Annotated[int, Field(ge=1, le=32)] = 4
     landscape: Annotated[int, Field(ge=3, le=401)] | None = None
 
@@ -372,8 +435,6 @@ class LayoutSection(Section):
             pair = getattr(self, key)
             if pair is not None and not pair[0] < pair[1]:
                 raise ValueError(f"{key} must be [low, high] with low < high (got {pair})")
-        if self.D_c is not None and self.D_c[0] < 0:
-            raise ValueError(f"D_c bounds must be >= 0 m (got {self.D_c})")
         if self.H_f is not None and self.H_f[0] <= 0:
             raise ValueError(f"H_f bounds must be > 0 m (got {self.H_f})")
         if self.theta_c_deg is not None and self.theta_c_deg[1] - self.theta_c_deg[0] > 360:
@@ -398,14 +459,49 @@ class RigFile(Section):
     layout: LayoutSection = Field(default_factory=LayoutSection)
 
     @model_validator(mode="after")
-    def _heights(self):
-        if self.person.H_p >= self.omni.H_o:
+    def _geometry(self):
+        """What no rig can be: the omni camera hangs from the ceiling looking down, so people stand
+        below it and nothing the PTZ is mounted on is above it; a face is framed inside the PTZ's image."""
+        H_o = self.omni.H_o
+        if self.person.H_p >= H_o:
             raise ValueError(
-                f"person.H_p = {self.person.H_p} m must be below omni.H_o = {self.omni.H_o} m"
+                f"person.H_p = {self.person.H_p} m must be below omni.H_o = {H_o} m"
+            )
+        if self.foveal.H_f > H_o:
+            raise ValueError(
+                f"foveal.H_f = {self.foveal.H_f:g} m is above the omni camera (omni.H_o = {H_o:g} m); the omni "
+                "camera looks down from the ceiling, so the PTZ's pan/tilt centre cannot be above it"
             )
         if self.layout.H_o is not None and self.layout.H_o[0] <= self.person.H_p:
             raise ValueError(
                 f"layout.H_o bounds {self.layout.H_o} must lie above person.H_p = {self.person.H_p} m"
+            )
+        top = max(H_o, self.layout.H_o[1] if self.layout.H_o is not None else H_o)
+        if self.layout.H_f is not None and self.layout.H_f[1] > top:
+            raise ValueError(
+                f"layout.H_f bounds {self.layout.H_f} reach above the omni camera ({top:g} m); the PTZ's "
+                "centre cannot be above it"
+            )
+        outline = self.room.outline
+        off = _outside_by(outline, 0.0, 0.0)
+        if off > WALL_TOLERANCE_M:
+            raise ValueError(
+                f"the omni camera's axis (the origin of room.outline) lies {off:.3g} m outside the room's outline; "
+                f"expected it over the room (within {WALL_TOLERANCE_M:g} m of a wall): it sees the room from above"
+            )
+        theta = math.radians(self.foveal.theta_c_deg)
+        D_c = self.foveal.D_c
+        off = _outside_by(outline, D_c * math.cos(theta), D_c * math.sin(theta))
+        if off > WALL_TOLERANCE_M:
+            raise ValueError(
+                f"foveal.D_c = {D_c:g} m at theta_c_deg = {self.foveal.theta_c_deg:g} puts the PTZ {off:.3g} m "
+                f"outside the room's outline; expected it in the room or on a wall (within {WALL_TOLERANCE_M:g} m): "
+                "from outside, the walls hide the room"
+            )
+        if self.layout.face_target_px > self.foveal.image_size[0]:
+            raise ValueError(
+                f"layout.face_target_px = {self.layout.face_target_px:g} px is wider than the PTZ's image "
+                f"(foveal.image_size {self.foveal.image_size[0]} px): no face can be that wide"
             )
         return self
 
@@ -445,9 +541,15 @@ def _omni_camera(sec: OmniSection, read_text: Callable[[str], str] | None, sourc
             rim = float(r_m * profile.u(math.radians(sec.fov_deg) / 2))
         else:
             rim = r_m
+    W, H = int(size[0]), int(size[1])
+    if not (0 <= center[0] <= W and 0 <= center[1] <= H):
+        raise ConfigError(
+            f"{source}: omni.center: ({center[0]:g}, {center[1]:g}) px lies outside the {W}x{H} image "
+            "(omni.image_size); the optical axis images inside the image"
+        )
     return OmniCamera(
         profile=profile, center=_a(center), r_m=_a(r_m), rim=_a(rim), H_o=_a(sec.H_o),
-        affine=_a(affine), image_size=(int(size[0]), int(size[1])),
+        affine=_a(affine), image_size=(W, H),
     )
 
 

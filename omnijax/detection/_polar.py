@@ -23,8 +23,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from ..config import Rig
+from ..config import ConfigError, Rig
 from ..geometry import floor_radius, person_image_extent, point_image_radius
+
+#: Fewest pixels of radius the polar sampling needs (a person's profile along a line).
+MIN_POLAR_SPAN_PX = 8
 
 
 class PolarIndex(eqx.Module):
@@ -61,7 +64,11 @@ def body_radius(rig: Rig) -> Array:
 
 def polar_range(rig: Rig) -> tuple[float, float]:
     """Radii (px) between which people are sought: from the floor circle of ``min_floor_radius``
-    to the outer end of a person standing at the room's farthest point (or ``r_max``)."""
+    to the outer end of a person standing at the room's farthest point (or ``r_max``).
+
+    A rig whose range is less than :data:`MIN_POLAR_SPAN_PX` wide cannot see anybody: one-line
+    :class:`~omnijax.config.ConfigError` naming the keys that decide it.
+    """
     omni, det = rig.omni, rig.detection
     r_min = float(point_image_radius(det.min_floor_radius, 0.0, omni.r_m, omni.H_o, omni.profile))
     if det.r_max is not None:
@@ -75,8 +82,13 @@ def polar_range(rig: Rig) -> tuple[float, float]:
         r_max = float(r_out) + 2.0
     W, H = omni.image_size
     r_max = min(r_max, float(omni.rim), math.hypot(W, H))
-    if not r_max > r_min + 8:
-        raise ValueError(f"polar range [{r_min:.1f}, {r_max:.1f}] px is empty: check omni.rim and detection.r_max")
+    if not r_max > r_min + MIN_POLAR_SPAN_PX:
+        raise ConfigError(
+            f"the room images between radii {r_min:.1f} and {r_max:.1f} px, less than {MIN_POLAR_SPAN_PX} px "
+            f"apart: from detection.min_floor_radius ({float(det.min_floor_radius):g} m) to a person at the room's "
+            "far end, within omni.rim and the image; nobody could be detected (check omni.H_o, omni.r_m, "
+            "omni.rim, detection.r_max and room.outline)"
+        )
     return r_min, r_max
 
 

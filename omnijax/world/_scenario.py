@@ -30,7 +30,7 @@ from annotated_types import Len
 from jaxtyping import Array, Bool, Float
 from pydantic import Field, model_validator
 
-from ..config import ConfigError, NonNeg, Pos, Rig, Section, validate
+from ..config import ConfigError, Coordinate, Metres, PosMetres, Rig, Section, validate, within
 from ..config._config import _in_polygon
 
 # --------------------------------------------------------------------------------------
@@ -161,9 +161,15 @@ class Scenario(eqx.Module):
 Unit = Annotated[float, Field(ge=0, le=1)]
 Colour = Annotated[list[Unit], Len(3, 3)]
 PosColour = Annotated[list[Annotated[float, Field(gt=0, le=1)]], Len(3, 3)]
-Point2 = Annotated[list[float], Len(2, 2)]
-Point3 = Annotated[list[float], Len(3, 3)]
-Range = Annotated[list[NonNeg], Len(2, 2)]
+Point2 = Annotated[list[Coordinate], Len(2, 2)]
+Point3 = Annotated[list[Coordinate], Len(3, 3)]
+#: Times (s): at most a day, the longest a scenario is rendered for.
+Seconds = Annotated[float, within(0.0, 86_400.0, "seconds", why="a day")]
+PosSeconds = Annotated[float, within(0.0, 86_400.0, "seconds", open_low=True, why="a day")]
+#: Walking speeds (m/s): nobody indoors is faster.
+Speed = Annotated[float, within(0.0, 10.0, "metres per second", why="faster than anyone walks")]
+#: Light (grey levels of a white surface): any image is white long before.
+Light = Annotated[float, within(0.0, 1e6, "grey levels", why="an image is white long before")]
 
 #: Default clothing palette (linear RGB albedos): saturated, dark and light garments.
 CLOTHING = (
@@ -182,28 +188,28 @@ def _ordered(pair: list[float], key: str) -> None:
 
 class SurfaceSection(Section):
     colour: Colour = Field(description="mean albedo, linear RGB in [0, 1]")
-    tile: NonNeg = Field(0.0, description="tile edge, m; 0: no tiles")
-    grout: NonNeg = Field(0.006, description="width of the lines between tiles, m")
+    tile: Metres = Field(0.0, description="tile edge, m; 0: no tiles")
+    grout: Metres = Field(0.006, description="width of the lines between tiles, m")
     grout_colour: Colour | None = Field(None, description="albedo of the grout; default: 0.6 x colour")
     tile_variation: Unit = Field(0.0, description="relative brightness spread between tiles")
     texture: Unit = Field(0.0, description="relative amplitude of the fine texture")
-    texture_scale: Pos = Field(0.05, description="size of the fine texture's grain, m")
+    texture_scale: PosMetres = Field(0.05, description="size of the fine texture's grain, m")
 
 
 class RoomSection(Section):
-    height: Pos = Field(description="ceiling height, m (walls stand on the rig's room.outline)")
+    height: PosMetres = Field(description="ceiling height, m (walls stand on the rig's room.outline)")
     floor: SurfaceSection
     walls: SurfaceSection
     ceiling: Colour = [0.85, 0.85, 0.85]
     skirting_colour: Colour = [0.25, 0.22, 0.20]
-    skirting_height: NonNeg = 0.08
+    skirting_height: Metres = 0.08
 
 
 class FurnitureSection(Section):
     name: str = ""
     corner_min: Point2 = Field(description="footprint corner with the smallest x and y, m")
     corner_max: Point2 = Field(description="footprint corner with the largest x and y, m")
-    height: Pos
+    height: PosMetres
     colour: Colour
 
     @model_validator(mode="after")
@@ -215,10 +221,10 @@ class FurnitureSection(Section):
 
 class PeopleSection(Section):
     count: Annotated[int, Field(ge=0, le=64)]
-    speed: Range = Field([0.8, 1.4], description="preferred walking speed range, m/s")
+    speed: Annotated[list[Speed], Len(2, 2)] = Field([0.8, 1.4], description="preferred walking speed range, m/s")
     pause_probability: Unit = 0.3
-    pause: Range = Field([1.0, 4.0], description="standing time range at a goal, s")
-    gap: NonNeg = Field(0.10, description="smallest distance kept between two people, m")
+    pause: Annotated[list[Seconds], Len(2, 2)] = Field([1.0, 4.0], description="standing time range at a goal, s")
+    gap: Metres = Field(0.10, description="smallest distance kept between two people, m")
     clothing: Annotated[list[Colour], Len(1)] = Field(default_factory=lambda: [list(c) for c in CLOTHING])
     skin: Annotated[list[Colour], Len(1)] = Field(default_factory=lambda: [list(c) for c in SKIN])
     hair: Annotated[list[Colour], Len(1)] = Field(default_factory=lambda: [list(c) for c in HAIR])
@@ -235,9 +241,9 @@ class PeopleSection(Section):
 
 class LampSection(Section):
     position: Point3 = Field(description="lamp position x, y, z in m (world frame)")
-    intensity: NonNeg = Field(description="grey level of a white surface 1 m away, facing the lamp")
+    intensity: Light = Field(description="grey level of a white surface 1 m away, facing the lamp")
     on: bool = Field(True, description="on at t = 0")
-    switch: list[NonNeg] = Field(default_factory=list, description="times (s) at which the lamp toggles")
+    switch: list[Seconds] = Field(default_factory=list, description="times (s) at which the lamp toggles")
 
     @model_validator(mode="after")
     def _times(self):
@@ -248,18 +254,19 @@ class LampSection(Section):
 
 class DriftSection(Section):
     amplitude: Annotated[float, Field(ge=0, lt=1)] = 0.0
-    period: Pos = Field(60.0, description="period of the drift, s")
+    period: PosSeconds = Field(60.0, description="period of the drift, s")
 
 
 class LightingSection(Section):
     spectrum: PosColour = Field(description="RGB of the one spectrum all lamps and the ambient share")
-    ambient: NonNeg
+    ambient: Light
     drift: DriftSection = DriftSection()
     lamps: list[LampSection] = Field(default_factory=list)
 
 
 class SensorSection(Section):
-    noise_sigma: NonNeg | None = Field(None, description="grey levels; default: the rig's detection.sensor_sigma")
+    noise_sigma: Annotated[float, within(0.0, 255.0, "grey levels", why="an 8-bit image's whole range")] | None = (
+        Field(None, description="grey levels; default: the rig's detection.sensor_sigma"))
     vignetting: Annotated[float, Field(ge=0, lt=1)] = 0.0
     jpeg_quality: Annotated[int, Field(ge=1, le=100)] | None = None
     antialias: Annotated[int, Field(ge=1, le=4)] = 2
@@ -269,7 +276,7 @@ class SensorSection(Section):
 class ScenarioFile(Section):
     name: str
     rig: str = Field(description="rig TOML file, relative to this scenario file")
-    fps: Pos = 25.0
+    fps: Annotated[float, within(0.0, 1000.0, "frames per second", open_low=True, why="no camera is faster")] = 25.0
     seed: Annotated[int, Field(ge=0)] = 0
     room: RoomSection
     furniture: list[FurnitureSection] = Field(default_factory=list)

@@ -1,7 +1,7 @@
 """The ``omnijax`` command line: one subcommand per job, each a module of ``runtime/cli/``.
 
 Exit codes: 0 success, 2 bad input (one line on stderr naming what was wrong and
-what was expected), 130 interrupted.
+what was expected), 130 interrupted (Ctrl-C or SIGTERM, at any moment; one line).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import importlib
 import os
 import sys
 
-from runtime.errors import UsageError
+from runtime.errors import Interrupted, UsageError, interrupt_handlers
 
 #: Subcommands, in the order ``--help`` lists them; each is ``runtime.cli.<name>``.
 COMMANDS: tuple[str, ...] = (
@@ -25,11 +25,22 @@ and every uncertainty is propagated so that the zoom is the largest that still
 keeps the head in frame with probability p_contain.
 
 Rig files are TOML (see configs/paper.toml for every key, with units).
+
+Exit codes: 0 done; 2 bad input (a config, file, flag or port), with one line on
+stderr naming what was wrong, found before any work and leaving nothing behind;
+130 interrupted (Ctrl-C or SIGTERM, at any moment; nothing half-written).
 """
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, whose errors are one line like every other bad input (not the usage block)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="omnijax", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -55,21 +66,51 @@ def enable_float64() -> None:
 def main(argv: list[str] | None = None) -> int:
     """Run one ``omnijax`` command; returns its exit code.
 
+    Ctrl-C and SIGTERM interrupt the command from the first moment (:func:`runtime.errors.interrupt_handlers`;
+    exit code 130, one line). The output folder (``--out``) is checked before any work
+    (:func:`runtime.output.check_output`), so that a job never runs to find it cannot write.
+
     Switches JAX to float64 first (geometry, uncertainty and Monte Carlo are meant to run in it;
     per-pixel kernels ask for float32 explicitly): the one place the command sets it. Through the
     environment while JAX is not imported yet, so that commands that never use it stay quick.
     """
-    enable_float64()
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except Exception as exc:
-        if not _is_input_error(exc):
-            raise
-        print(f"omnijax {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"omnijax {args.command}: interrupted", file=sys.stderr)
-        return 130
+    with interrupt_handlers():
+        command, args = "omnijax", None
+        try:
+            enable_float64()
+            try:
+                args = build_parser().parse_args(argv)
+            except SystemExit as exc:  # --help (0) or a flag argparse refused (2, one line printed)
+                return exc.code if isinstance(exc.code, int) else 2
+            command = f"omnijax {args.command}"
+            if getattr(args, "out", None) is not None:
+                from runtime.output import check_output
 
+                check_output(args.out)
+            return int(args.func(args) or 0)
+        except Exception as exc:
+            if not _is_input_error(exc):
+                raise
+            print(f"{command}: error: {exc}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt as exc:
+            if isinstance(exc, Interrupted) and exc.unwritten is None and not exc.written and args is not None:
+                exc.unwritten = getattr(args, "out", None)  # interrupted before its outputs were staged
+            what = exc.describe() if isinstance(exc, Interrupted) else "interrupted"
+            print(f"{command}: {what}", file=sys.stderr)
+            return 130
+
+
+def console() -> None:
+    """The ``omnijax`` executable (and ``python -m runtime.cli``): :func:`main`, then exit with its code.
+
+    After Ctrl-C or SIGTERM (exit code 130) the process ends at once, once :func:`main` has cleaned
+    up (staged outputs removed, child processes stopped): JAX may still be compiling on its own
+    threads, and the interpreter's normal shutdown underneath them can crash (SIGSEGV).
+    """
+    code = main()
+    if code == 130:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    sys.exit(code)

@@ -20,6 +20,9 @@ from runtime.settings import Names
 
 #: ``--pace``: frames at the source's rate (late ones dropped), or every frame as fast as possible.
 PACES: tuple[str, ...] = ("live", "all")
+#: Most frames of a synthetic scenario (``--frames`` of render, demo): 11 hours at 25 fps, the walks of
+#: all frames being simulated up front.
+MAX_FRAMES = 1_000_000
 #: The PTZ protocols (``--protocol``) of the device profiles.
 PROTOCOLS = Names("runtime.ptz.profile:PROTOCOLS")
 

@@ -63,13 +63,13 @@ def run(args: argparse.Namespace) -> int:
     sizes = [_parse_size(s) for s in args.sizes]
     if args.frames < 10:
         raise UsageError(f"--frames: expected at least 10 timed calls, got {args.frames}")
-    scenario = str(scenario_file(args.scenario))
     if hasattr(os, "sched_getaffinity") and args.core not in os.sched_getaffinity(0):
         raise UsageError(f"--core: core {args.core} is not available to this process")
 
     from runtime.bench.timing import pin_to_one_core
 
-    pin_to_one_core(args.core)
+    pin_to_one_core(args.core)  # before anything imports JAX (reading the scenario does)
+    scenario = str(scenario_file(args.scenario))
     from runtime.bench.detector import bench_size
 
     report = {"cores": 1, "scenario": scenario}

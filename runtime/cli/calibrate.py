@@ -45,6 +45,7 @@ def _ints(text: str) -> list[int]:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from runtime.cli._options import add_ptz_profile_option, deprecated_alias
+    from runtime.settings import finite_float
 
     p = sub.add_parser("calibrate", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -61,19 +62,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="simulate: floor positions per calibration (default 4,8,16)")
     p.add_argument("--heights", type=_floats, default=[0.0, 1.5], metavar="M,M",
                    help="simulate: heights of the marks aimed at above each position (default 0,1.5 m)")
-    p.add_argument("--sigma-ptz-deg", type=float, default=0.1, metavar="DEG",
+    p.add_argument("--sigma-ptz-deg", type=finite_float, default=0.1, metavar="DEG",
                    help="simulate: PTZ reading / aiming noise per axis (default 0.1 deg)")
     deprecated_alias(p, "--sigma-height", p.add_argument(
-        "--sigma-height-m", type=float, default=0.005, metavar="M",
+        "--sigma-height-m", type=finite_float, default=0.005, metavar="M",
         help="simulate: error of the marks' heights, as OBS.json's sigma_height_m (default 0.005 m)"))
-    p.add_argument("--sigma-zero-deg", type=float, default=2.0, metavar="DEG",
+    p.add_argument("--sigma-zero-deg", type=finite_float, default=2.0, metavar="DEG",
                    help="simulate: spread of the true pan/tilt zero offsets (default 2 deg)")
     p.add_argument("--seed", type=int, default=0, help="simulate: random seed (default 0)")
-    p.add_argument("--rim-search", type=float, default=0.25, metavar="FRAC",
+    p.add_argument("--rim-search", type=finite_float, default=0.25, metavar="FRAC",
                    help="look for the rim within the configured rim radius * (1 +- FRAC) (default 0.25)")
-    p.add_argument("--max-sigma-m", type=float, default=0.10, metavar="M",
+    p.add_argument("--max-sigma-m", type=finite_float, default=0.10, metavar="M",
                    help="refuse a rig whose fitted length sigmas exceed this (default 0.10 m)")
-    p.add_argument("--max-sigma-deg", type=float, default=2.0, metavar="DEG",
+    p.add_argument("--max-sigma-deg", type=finite_float, default=2.0, metavar="DEG",
                    help="refuse a rig whose fitted angle sigmas exceed this (default 2 deg)")
     p.set_defaults(func=run)
 
@@ -145,19 +146,13 @@ def _read_frame(path: str, size: tuple[int, int]):
 
 
 def _read_json(path: str):
-    import json
-
     from runtime.errors import UsageError
+    from runtime.files import read_json
 
     try:
-        with open(path) as fh:
-            return json.load(fh)
-    except FileNotFoundError:
-        raise UsageError(f"--observations: no such file {path!r}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UsageError(f"--observations: cannot read {path!r}: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise UsageError(f"--observations: {path} is not valid JSON: {exc}") from None
+        return read_json(path, "observations file (JSON)", UsageError)
+    except UsageError as exc:
+        raise UsageError(f"--observations: {exc}") from None
 
 
 def _calibrate(args, rig, profile) -> int:

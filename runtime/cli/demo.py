@@ -25,7 +25,12 @@ Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line pe
 frame), DIR/annotated.mp4 (the operator's view: the omni frame with sectors,
 centre lines, feet, heads, tracks with 95 % ellipses, and the foveal view
 rendered from the synthetic world at the emulated PTZ's actual position) and
-DIR/view.png (one frame of it).
+DIR/view.png (one frame of it, --screenshot; not written if the run ends before
+that frame).
+
+Ctrl-C or SIGTERM during start-up (building the world, learning the background,
+compiling: 20-30 s) stops it at once: nothing is written, the emulator is stopped,
+exit code 130. Once the loop runs, they end it and everything is written.
 
 --faults injects faults while running, e.g.
   broken@300,wrong-size@350,ptz-unplug@400:2,end@900
@@ -97,8 +102,8 @@ class FovealInset:
 
 
 def run(args: argparse.Namespace) -> int:
-    from runtime.cli._options import load_ptz_profile, loop_config, parse_faults, scenario_file
-    from runtime.errors import UsageError
+    from runtime.cli._options import MAX_FRAMES, load_ptz_profile, loop_config, parse_faults, scenario_file
+    from runtime.errors import UsageError, interrupted_during
 
     config = loop_config(args)
     if args.background_step < 1:
@@ -107,8 +112,15 @@ def run(args: argparse.Namespace) -> int:
     if args.frames < n_bg + 20:
         raise UsageError(f"--frames: expected at least {n_bg + 20} (background learning takes the first {n_bg}), "
                          f"got {args.frames}")
+    if args.frames > MAX_FRAMES:
+        raise UsageError(f"--frames: expected at most {MAX_FRAMES} (the walks are simulated up front), "
+                         f"got {args.frames}")
     if args.inset_every < 1:
         raise UsageError(f"--inset-every: expected a positive count, got {args.inset_every}")
+    if args.screenshot < 1:
+        raise UsageError(f"--screenshot: expected a processed frame number >= 1, got {args.screenshot}")
+    if args.seed is not None and args.seed < 0:
+        raise UsageError(f"--seed: expected an integer >= 0, got {args.seed}")
     plan = parse_faults(args.faults)
     scenario = scenario_file(args.scenario)
 
@@ -123,15 +135,17 @@ def run(args: argparse.Namespace) -> int:
     rig, sc = load_scenario(scenario)
     print(f"omnijax demo: building the world '{sc.name}' ({args.frames} frames at {sc.fps:g} fps) ...",
           file=sys.stderr, flush=True)
-    try:
-        world = build_world(rig, sc, args.seed, n_frames=args.frames)
-    except ValueError as exc:
-        raise UsageError(f"{scenario}: {exc}") from None
-    synthetic = SyntheticSource(world)
-    source = FaultySource(synthetic, plan) if not plan.empty else synthetic
-    scorer = DemoScorer(world, synthetic)
+    with interrupted_during("during start-up"):
+        try:
+            world = build_world(rig, sc, args.seed, n_frames=args.frames)
+        except ValueError as exc:
+            raise UsageError(f"{scenario}: {exc}") from None
+        synthetic = SyntheticSource(world)
+        source = FaultySource(synthetic, plan) if not plan.empty else synthetic
+        scorer = DemoScorer(world, synthetic)
     profile = load_ptz_profile(None, args.protocol)
-    with EmulatorProcess(args.protocol) as emulator:
+    # the emulator is stopped when this block is left in any way, and stops by itself if this process dies
+    with interrupted_during("during start-up"), EmulatorProcess(args.protocol) as emulator:
         driver = PtzDriver(str(emulator.link), profile)
         try:
             driver.connect(timeout=10)
@@ -185,4 +199,6 @@ def _report(s: dict, out) -> None:
     p = s["ptz"]
     print(f"  PTZ: {p['commands']} commands, {p['errors']} errors, {p['reconnects']} reconnects; "
           f"faults: {s['faults']['broken_frames']} broken, {s['faults']['wrong_size_frames']} wrong size")
-    print(f"demo outputs: {out}/ (summary.json, log.jsonl, {s['outputs'].get('video', 'no video')}, view.png)")
+    o = s["outputs"]
+    written = ["summary.json", "log.jsonl", *(o[k] for k in ("video", "record", "view") if k in o)]
+    print(f"demo outputs: {out}/ ({', '.join(written)})")

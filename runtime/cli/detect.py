@@ -26,6 +26,7 @@ OpenCV's MOG2 after both have learnt the scene (no --config needed).
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from runtime.cli._options import deprecated_alias
+    from runtime.settings import finite_float
 
     p = sub.add_parser("detect", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -40,12 +41,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--frames", type=int, metavar="N", help="read at most N frames of SOURCE, background learning included"))
     p.add_argument("--change-only", action="store_true",
                    help="per-pixel change masks only, compared with MOG2 (perspective footage)")
-    p.add_argument("--pixel-fa", type=float, default=1e-3, metavar="P",
+    p.add_argument("--pixel-fa", type=finite_float, default=1e-3, metavar="P",
                    help="--change-only: per-pixel false-alarm probability of the mask (default 1e-3)")
-    p.add_argument("--sigma-floor", type=float, metavar="GREY",
+    p.add_argument("--sigma-floor", type=finite_float, metavar="GREY",
                    help="lowest sensor noise assumed per pixel, grey levels (default 0.5; --change-only: 2.0, "
                         "MOG2's own minimum, for compressed video)")
-    p.add_argument("--adapt-rate", type=float, metavar="A",
+    p.add_argument("--adapt-rate", type=finite_float, metavar="A",
                    help="background adaptation rate where nothing changed (default: [detection] adapt_rate; "
                         "--change-only: 0.02)")
     p.set_defaults(func=run)

@@ -45,7 +45,7 @@ OVERRIDES = {"objective": "objective", "statistic": "statistic", "vary": "vary",
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from runtime.cli._options import add_cache_options, deprecated_alias
-    from runtime.settings import Names
+    from runtime.settings import Names, finite_float
 
     p = sub.add_parser("optimise", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -57,14 +57,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="over the floor: %(choices)s (layout.statistic)")
     p.add_argument("--vary", nargs="+", choices=Names("omnijax.config:LAYOUT_NAMES"), metavar="NAME",
                    help="placement variables to search: %(choices)s (layout.vary)")
-    deprecated_alias(p, "--grid-step", p.add_argument("--grid-step-m", type=float, metavar="M",
+    deprecated_alias(p, "--grid-step", p.add_argument("--grid-step-m", type=finite_float, metavar="M",
                                                       help="floor grid spacing in m (layout.grid_step)"))
     p.add_argument("--starts", type=int, metavar="N", help="BFGS starts (layout.starts)")
     p.add_argument("--landscape", type=int, metavar="N", help="grid values per varied variable (layout.landscape)")
-    p.add_argument("--near-radius", type=float, metavar="M",
+    p.add_argument("--near-radius", type=finite_float, metavar="M",
                    help="left out around the PTZ's foot, m (layout.near_radius)")
     deprecated_alias(p, "--face-target", p.add_argument(
-        "--face-target-px", type=float, metavar="PX",
+        "--face-target-px", type=finite_float, metavar="PX",
         help="face width bounding the operational region, px (layout.face_target_px)"))
     add_cache_options(p)
     p.add_argument("--no-maps", action="store_true", help="write layout.json only")

@@ -17,13 +17,19 @@ in omnijax's frame and in the device's own degrees and units. Use it to check
 a profile's [mounting] section: `--pan-deg 0 --tilt-deg 0` must point the
 camera at the omni camera's axis, level.
 
-Exit codes: 0 done (and reached, if a target was sent), 1 no camera or target
-not reached in time, 2 bad arguments or profile.
+A target beyond the device's limits (or the lens's zoom range) is clamped onto
+them, and the output says which axes were clamped. Pan must be within a turn
+either way, tilt within [-90, 90] deg and zoom positive.
+
+Exit codes: 0 done (and reached, if a target was sent), 1 no camera answered or
+target not reached in time, 2 bad arguments or profile, or a port that cannot
+be opened (a malformed URL, no such device).
 """
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from runtime.cli._options import PROTOCOLS, add_ptz_profile_option, deprecated_alias
+    from runtime.settings import finite_float
 
     p = sub.add_parser("ptz", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -33,12 +39,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--protocol", choices=PROTOCOLS, metavar="NAME",
                    help="%(choices)s: the shipped profile to use when --ptz-profile is not given (default visca); "
                         "with --ptz-profile, the protocol it must have")
-    p.add_argument("--pan-deg", type=float, metavar="DEG", help="target pan, omnijax frame (deg)")
-    p.add_argument("--tilt-deg", type=float, metavar="DEG", help="target tilt, omnijax frame (deg, up positive)")
-    p.add_argument("--zoom", type=float, metavar="Z", help="target zoom factor")
-    p.add_argument("--wait", type=float, default=15.0, metavar="S",
+    p.add_argument("--pan-deg", type=finite_float, metavar="DEG", help="target pan, omnijax frame (deg)")
+    p.add_argument("--tilt-deg", type=finite_float, metavar="DEG", help="target tilt, omnijax frame (deg, up positive)")
+    p.add_argument("--zoom", type=finite_float, metavar="Z", help="target zoom factor")
+    p.add_argument("--wait", type=finite_float, default=15.0, metavar="S",
                    help="seconds to wait for the camera to reach the target (default 15)")
-    p.add_argument("--timeout", type=float, default=5.0, metavar="S",
+    p.add_argument("--timeout", type=finite_float, default=5.0, metavar="S",
                    help="seconds to wait for the camera to answer when connecting (default 5)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
@@ -48,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     from runtime.cli._options import load_ptz_profile
     from runtime.errors import UsageError
     from runtime.output import dumps
-    from runtime.ptz import PtzDriver, PtzError
+    from runtime.ptz import PtzDriver, PtzError, PtzPortError
 
     if args.ptz is None:
         raise UsageError("--ptz: expected the camera's pyserial URL (/dev/ttyUSB0, socket://host:port, ...)")
@@ -56,8 +62,15 @@ def run(args: argparse.Namespace) -> int:
     given = [v is not None for v in (args.pan_deg, args.tilt_deg, args.zoom)]
     if any(given) and not all(given):
         raise UsageError("--pan-deg, --tilt-deg, --zoom: give all three, or none to only ask the position")
-    if all(given) and not all(math.isfinite(v) for v in (args.pan_deg, args.tilt_deg, args.zoom)):
-        raise UsageError("--pan-deg, --tilt-deg, --zoom: expected finite numbers")
+    if all(given):
+        # beyond these a value is no direction (more than a turn of pan, tilt past straight up or down)
+        if not -360 <= args.pan_deg <= 360:
+            raise UsageError(f"--pan-deg: expected degrees in [-360, 360] (one turn either way), got {args.pan_deg:g}")
+        if not -90 <= args.tilt_deg <= 90:
+            raise UsageError(f"--tilt-deg: expected degrees in [-90, 90] (straight down to straight up), "
+                             f"got {args.tilt_deg:g}")
+        if not args.zoom > 0:
+            raise UsageError(f"--zoom: expected a zoom factor > 0, got {args.zoom:g}")
     for flag, value in (("--wait", args.wait), ("--timeout", args.timeout)):
         if not value > 0:
             raise UsageError(f"{flag}: expected a positive number of seconds, got {value}")
@@ -66,6 +79,8 @@ def run(args: argparse.Namespace) -> int:
     driver = PtzDriver(args.ptz, profile)
     try:
         driver.connect(timeout=args.timeout)
+    except PtzPortError as exc:
+        raise UsageError(f"--ptz: {exc}") from None
     except PtzError as exc:
         print(f"omnijax ptz: {exc}", file=sys.stderr)
         return 1
@@ -98,6 +113,6 @@ def run(args: argparse.Namespace) -> int:
               f"zoom {p['zoom']:.2f}x (device: pan {p['device']['pan_deg']:.2f} deg, "
               f"tilt {p['device']['tilt_deg']:.2f} deg, units {pan_u} {tilt_u} {zoom_u})")
         if "target" in report:
-            clamped = f", clamped on {', '.join(t.clamped)}" if t.clamped else ""
+            clamped = f", clamped to the device's limits on {', '.join(t.clamped)}" if t.clamped else ""
             print(f"target {'reached' if reached else 'NOT reached'} within {args.wait:g} s{clamped}")
     return 0 if reached else 1

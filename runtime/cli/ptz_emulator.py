@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
+import threading
+import time
 from pathlib import Path
+
+from runtime.errors import UsageError
 
 HELP = "a VISCA or Pelco-D camera on a pseudo-terminal, for tests, demos and trying a set-up"
 DESCRIPTION = """\
@@ -39,15 +44,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--faults", default="", metavar="SPEC",
                    help="inject faults per reply, e.g. 'garble=0.05,drop=0.01,noise=0.05,buffer_full=0.1'")
     p.add_argument("--seed", type=int, default=0, help="seed of the injected faults (default 0)")
+    p.add_argument("--parent-pid", type=int, metavar="PID",
+                   help="stop when process PID ends (the demo and the tests pass their own, so that an emulator "
+                        "never outlives them)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from runtime.cli._options import load_ptz_profile
-    from runtime.errors import UsageError
+    from runtime.output import check_output_file
     from runtime.ptz import Faults, PtyEmulator
 
     profile = load_ptz_profile(args.ptz_profile, args.protocol)
+    parent_alive = _watch(args.parent_pid) if args.parent_pid is not None else None
     top = 7 if args.protocol == "visca" else 255
     if args.address is not None and not 1 <= args.address <= top:
         raise UsageError(f"--address: expected 1-{top} for {args.protocol}, got {args.address}")
@@ -56,18 +65,61 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UsageError(f"--faults: {exc}") from None
     for flag, value in (("--state-file", args.state_file), ("--link", args.link)):
-        if value is not None and not Path(value).parent.is_dir():
-            raise UsageError(f"{flag}: no such directory: {Path(value).parent}")
+        if value is not None:
+            check_output_file(value, flag)
+    if args.link is not None and Path(args.link).exists() and not Path(args.link).is_symlink():
+        raise UsageError(f"--link: {args.link} exists and is not a symlink; expected a new path or an old link")
 
     emulator = PtyEmulator(profile, args.address, state_file=args.state_file, link=args.link,
                            faults=faults, seed=args.seed)
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: emulator.stop())
-    print(emulator.path, flush=True)
-    print(f"omnijax ptz-emulator: {profile.name} ({profile.protocol}, address {emulator.camera.address}) on "
-          f"{emulator.path}" + (f", linked from {args.link}" if args.link else ""), file=sys.stderr, flush=True)
     try:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, lambda *_: emulator.stop())
+        if parent_alive is not None:
+            _stop_when_gone(emulator, parent_alive)
+        print(emulator.path, flush=True)
+        print(f"omnijax ptz-emulator: {profile.name} ({profile.protocol}, address {emulator.camera.address}) on "
+              f"{emulator.path}" + (f", linked from {args.link}" if args.link else ""), file=sys.stderr, flush=True)
         emulator.serve()
     finally:
         emulator.close()
     return 0
+
+
+def _watch(pid: int):
+    """A function telling whether process ``pid`` is still there (one-line error if it is not now).
+
+    If ``pid`` is this process's parent, its end is seen as this process being re-parented
+    (exact even while the dead parent is not yet reaped); otherwise as ``pid`` vanishing.
+    Polling this works however the parent ended (SIGKILL included) and whichever of its
+    threads started this process, where PR_SET_PDEATHSIG would follow the starting thread.
+    """
+    is_parent = os.getppid() == pid
+
+    def alive() -> bool:
+        if is_parent:
+            return os.getppid() == pid
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            pass
+        return True
+
+    if pid < 1 or not alive():
+        raise UsageError(f"--parent-pid: no process {pid}")
+    return alive
+
+
+def _stop_when_gone(emulator, alive, every_s: float = 0.2) -> None:
+    """Stop ``emulator`` (a watcher thread) as soon as ``alive()`` is false."""
+
+    def watch() -> None:
+        while not emulator.stopped:
+            if not alive():
+                emulator.stop()
+                return
+            time.sleep(every_s)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()

@@ -25,13 +25,11 @@ camera and write to DIR:
 The same seed gives the same frames, bit for bit.
 """
 
-#: Upper bound on --frames (11 hours at 25 fps): the walks of all frames are simulated up front.
-MAX_FRAMES = 1_000_000
-
 CODECS = {"ffv1": ("FFV1", "omni.avi"), "mjpg": ("MJPG", "omni.avi"), "mp4v": ("mp4v", "omni.mp4")}
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from runtime.settings import finite_float
     p = sub.add_parser("render", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenario", required=True, metavar="S", help="scenario TOML, or a name in configs/scenarios")
@@ -43,11 +41,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--png-every", type=int, default=0, metavar="K", help="also save every K-th frame as PNG")
     p.add_argument("--foveal-every", type=int, default=0, metavar="K",
                    help="every K-th frame, render the foveal view of each visible person")
-    p.add_argument("--foveal-zoom", type=float, default=4.0, metavar="Z", help="zoom of those views (default 4)")
+    p.add_argument("--foveal-zoom", type=finite_float, default=4.0, metavar="Z", help="zoom of those views (default 4)")
     p.set_defaults(func=run)
 
 
 def _check(args) -> None:
+    from runtime.cli._options import MAX_FRAMES
     from runtime.errors import UsageError
 
     if not 1 <= args.frames <= MAX_FRAMES:
@@ -59,12 +58,6 @@ def _check(args) -> None:
         raise UsageError(f"--seed: expected an integer >= 0, got {args.seed}")
     if not args.foveal_zoom > 0:
         raise UsageError(f"--foveal-zoom: expected a zoom factor > 0, got {args.foveal_zoom}")
-    out = Path(args.out)
-    for folder in (out, *out.parents):
-        if folder.exists():
-            if not folder.is_dir():
-                raise UsageError(f"--out: {folder} is a file, expected a folder (or a new path)")
-            break
 
 
 def _write_png(path: Path, rgb) -> None:

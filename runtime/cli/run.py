@@ -28,6 +28,7 @@ and DIR/annotated.mp4 (the operator's view; --no-video to skip it).
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from runtime.cli._options import PACES, add_loop_options, add_ptz_profile_option
+    from runtime.settings import finite_float
 
     p = sub.add_parser("run", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -39,7 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pace", choices=PACES,
                    help="live: frames at the source's rate, late ones dropped; all: every frame as fast as "
                         "possible (default: live for cameras and videos, all for image folders)")
-    p.add_argument("--fps", type=float, metavar="F", help="frame rate of an image folder")
+    p.add_argument("--fps", type=finite_float, metavar="F", help="frame rate of an image folder")
     p.add_argument("--background-frames", type=int, metavar="N",
                    help="frames to learn the background from (default: [detection] background_frames)")
     p.add_argument("--background-step", type=int, default=1, metavar="K",

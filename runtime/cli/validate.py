@@ -38,6 +38,7 @@ from the PTZ's foot; per_quantity says where each worst case is.
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from runtime.cli._options import deprecated_alias
+    from runtime.settings import finite_float
 
     p = sub.add_parser("validate", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -46,11 +47,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quick", action="store_true",
                    help="coarser grids and fewer Monte Carlo trials (CI-sized, under a minute)")
     deprecated_alias(p, "--grid-step", p.add_argument(
-        "--grid-step-px", type=float, metavar="PX",
+        "--grid-step-px", type=finite_float, metavar="PX",
         help="floor grid spacing in omni-image pixels (default: image width / 80; --quick / 40)"))
-    p.add_argument("--min-distance", type=float, default=1.0, metavar="M",
+    p.add_argument("--min-distance", type=finite_float, default=1.0, metavar="M",
                    help="compare with Monte Carlo only this far from the PTZ's foot (default 1 m)")
-    p.add_argument("--rel-tol", type=float, metavar="REL",
+    p.add_argument("--rel-tol", type=finite_float, metavar="REL",
                    help="Monte Carlo tolerance of the variances, 95%% (default 0.01; --quick 0.03)")
     p.add_argument("--trials", type=int, metavar="N",
                    help="Table 1 frames per position, fixed rig (default 1000; --quick 40)")
@@ -69,8 +70,9 @@ def _counts(args) -> tuple[int, int, int]:
     from runtime.errors import UsageError
 
     quick = args.quick
-    n = (args.trials or (40 if quick else 1000), args.fresh_trials or (24 if quick else 500),
-         args.empty_frames or (40 if quick else 500))
+    given = (args.trials, args.fresh_trials, args.empty_frames)
+    defaults = (40, 24, 40) if quick else (1000, 500, 500)
+    n = tuple(d if v is None else v for v, d in zip(given, defaults))
     for name, v in zip(("--trials", "--fresh-trials", "--empty-frames"), n):
         if v < 8:
             raise UsageError(f"{name}: expected at least 8 frames, got {v}")
@@ -102,18 +104,22 @@ def run(args: argparse.Namespace) -> int:
     from runtime.validation.report import report_markdown
     from runtime.validation.theory import QUANTITIES, chroma_check, ptz_check
 
+    # a value given is checked, never replaced by the default
+    if args.grid_step_px is not None and not args.grid_step_px > 0:
+        raise UsageError(f"--grid-step-px: expected a positive number of pixels, got {args.grid_step_px:g}")
+    if args.rel_tol is not None and not 0 < args.rel_tol < 1:
+        raise UsageError(f"--rel-tol: expected a number in (0, 1), got {args.rel_tol:g}")
+    if not args.min_distance >= 0:
+        raise UsageError(f"--min-distance: expected metres >= 0, got {args.min_distance:g}")
+    n_fixed, n_fresh, n_empty = _counts(args)
     rig = load_rig(args.config)
     width = rig.omni.image_size[0]
-    step = args.grid_step_px or width / (40 if args.quick else 80)
-    rel_tol = args.rel_tol or (0.03 if args.quick else 0.01)
-    if not step > 0:
-        raise UsageError(f"--grid-step-px: expected a positive number of pixels, got {step}")
-    if not 0 < rel_tol < 1:
-        raise UsageError(f"--rel-tol: expected a number in (0, 1), got {rel_tol}")
-    if not args.min_distance >= 0:
-        raise UsageError(f"--min-distance: expected metres >= 0, got {args.min_distance}")
+    step = args.grid_step_px if args.grid_step_px is not None else width / (40 if args.quick else 80)
+    if not 1 <= step <= width / 4:
+        raise UsageError(f"--grid-step-px: expected 1 px (a point per pixel) to a quarter of the omni image's width "
+                         f"({width / 4:g} px), got {step:g}")
+    rel_tol = args.rel_tol if args.rel_tol is not None else (0.03 if args.quick else 0.01)
 
-    n_fixed, n_fresh, n_empty = _counts(args)
     scenario, scenario_name = _scenario(args, rig)
 
     t0 = time.perf_counter()

@@ -27,22 +27,22 @@ radians, for one release, and says so on stderr.
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from runtime.cli._options import deprecated_alias
-    from runtime.settings import Names
+    from runtime.settings import Names, finite_float
 
     p = sub.add_parser("variance", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", required=True, metavar="FILE", help="rig TOML file")
-    p.add_argument("--foot", nargs=2, type=float, required=True, metavar=("R_F", "THETA_F"),
+    p.add_argument("--foot", nargs=2, type=finite_float, required=True, metavar=("R_F", "THETA_F"),
                    help="foot image radius (px from the image centre) and azimuth (rad)")
     p.add_argument("--method", default="autodiff", choices=Names("omnijax.uncertainty:METHODS"), metavar="M",
                    help="%(choices)s (default autodiff)")
-    p.add_argument("--sigma-rf", type=float, metavar="PX",
+    p.add_argument("--sigma-rf", type=finite_float, metavar="PX",
                    help="sigma of r_f in px (default: [detection] sigma_r_f)")
     deprecated_alias(p, "--sigma-theta", p.add_argument(
-        "--sigma-theta-deg", type=float, metavar="DEG",
+        "--sigma-theta-deg", type=finite_float, metavar="DEG",
         help="sigma of theta_f in degrees (default: [detection] sigma_theta_f_deg)"),
         dest="sigma_theta_rad", note=" (which takes degrees; --sigma-theta is in radians)")
-    p.add_argument("--rel-tol", type=float, default=0.005, metavar="REL",
+    p.add_argument("--rel-tol", type=finite_float, default=0.005, metavar="REL",
                    help="montecarlo: relative tolerance of the variances (95%%), default 0.005")
     p.add_argument("--seed", type=int, default=0, help="montecarlo: random seed (default 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")

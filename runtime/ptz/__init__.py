@@ -7,7 +7,7 @@
 - :mod:`runtime.ptz.emulator`: cameras on a pseudo-terminal (``omnijax ptz-emulator``).
 """
 
-from .driver import PtzDriver, PtzError
+from .driver import PtzDriver, PtzError, PtzPortError
 from .emulator import Faults, PelcoDCamera, PtyEmulator, ViscaCamera
 from .profile import (
     DeviceProfile,
@@ -21,5 +21,5 @@ from .profile import (
 
 __all__ = [
     "DeviceProfile", "DeviceTarget", "Faults", "PelcoDCamera", "ProfileError", "PtyEmulator", "PtzDriver",
-    "PtzError", "PtzPosition", "ViscaCamera", "default_profile", "load_profile", "parse_profile",
+    "PtzError", "PtzPortError", "PtzPosition", "ViscaCamera", "default_profile", "load_profile", "parse_profile",
 ]

@@ -4,10 +4,16 @@
 follows the pty) and ``--state-file``; the driver opens the link. :meth:`unplug` kills the
 emulator, so the port vanishes as when a USB adapter is pulled, and starts a new one on the
 same link after a delay, as when it is plugged back in.
+
+The child never outlives this process: it runs in its own session (Ctrl-C in a terminal
+reaches this process only), leaving the context manager in any way (an error, Ctrl-C,
+SIGTERM) stops it, and it runs with ``--parent-pid`` set to this process, so that it stops by
+itself within a fraction of a second if this process dies without cleaning up (SIGKILL).
 """
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import tempfile
@@ -37,12 +43,13 @@ class EmulatorProcess:
     def start(self) -> EmulatorProcess:
         """Start the emulator and wait for its pty (first line on its stdout)."""
         cmd = [sys.executable, "-m", "runtime.cli", "ptz-emulator", "--protocol", self.protocol,
-               "--link", str(self.link), "--state-file", str(self.state_file)]
+               "--link", str(self.link), "--state-file", str(self.state_file), "--parent-pid", str(os.getpid())]
         if self.profile:
             cmd += ["--ptz-profile", self.profile]
         with self._lock:
+            # its own session: Ctrl-C in the terminal reaches this process, which stops the child itself
             self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                                         cwd=Path(__file__).resolve().parents[2])
+                                         cwd=Path(__file__).resolve().parents[2], start_new_session=True)
             line = self.proc.stdout.readline().strip()
         if not line:
             raise RuntimeError(f"the PTZ emulator did not start (exit code {self.proc.poll()})")
@@ -58,7 +65,11 @@ class EmulatorProcess:
         with self._lock:
             if self.proc is not None and self.proc.poll() is None:
                 self.proc.terminate()
-                self.proc.wait(5)
+                try:
+                    self.proc.wait(5)
+                except subprocess.TimeoutExpired:
+                    self.proc.kill()
+                    self.proc.wait()
             self.proc = None
 
     def unplug(self, seconds: float) -> None:
@@ -78,7 +89,11 @@ class EmulatorProcess:
             self._tmp.cleanup()
 
     def __enter__(self) -> EmulatorProcess:
-        return self.start()
+        try:
+            return self.start()
+        except BaseException:  # interrupted or failed while starting: no child is left behind
+            self.close()
+            raise
 
     def __exit__(self, *exc) -> None:
         self.close()

@@ -29,6 +29,7 @@ or a pseudo-terminal from ``omnijax ptz-emulator``.
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections import deque
@@ -55,6 +56,10 @@ _LATENCIES_KEPT = 10_000
 
 class PtzError(RuntimeError):
     """The PTZ cannot be reached or did not answer (one line)."""
+
+
+class PtzPortError(PtzError):
+    """The port itself is wrong: a malformed URL, or a device path that does not exist (bad input)."""
 
 
 class _LinkLost(Exception):
@@ -127,15 +132,21 @@ class PtzDriver:
     def connect(self, timeout: float | None = 5.0) -> PtzDriver:
         """Start the worker; wait up to ``timeout`` s for the camera (``None``: do not wait).
 
-        Raises :class:`PtzError` if the URL is malformed, or if no initialised
-        connection was made in time (the driver is then stopped again).
+        Raises :class:`PtzPortError` if the URL is malformed or names a device that does not
+        exist, :class:`PtzError` if no initialised connection was made in time (the driver is
+        then stopped again).
         """
         if self._worker is not None:
             return self
         try:
-            serial.serial_for_url(self.port, do_not_open=True)
-        except (ValueError, serial.SerialException) as exc:
-            raise PtzError(f"{self.port}: not a usable serial port URL: {exc}") from None
+            port = serial.serial_for_url(self.port, do_not_open=True)
+            if "://" in self.port and hasattr(port, "from_url"):
+                port.from_url(self.port)  # URL handlers parse their host, port and options only when opening
+        except (ValueError, TypeError, serial.SerialException) as exc:
+            reason = "expected HOST:PORT after the scheme" if isinstance(exc, TypeError) else exc  # pyserial's
+            raise PtzPortError(f"{self.port}: not a usable serial port URL: {reason}") from None
+        if "://" not in self.port and not os.path.exists(self.port):
+            raise PtzPortError(f"{self.port}: no such serial device")
         self._stop.clear()
         self._worker = threading.Thread(target=self._run, name="ptz-worker", daemon=True)
         self._worker.start()

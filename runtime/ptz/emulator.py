@@ -469,6 +469,11 @@ class PtyEmulator:
         """Ask :meth:`serve` to return (safe from a signal handler)."""
         self._stop.set()
 
+    @property
+    def stopped(self) -> bool:
+        """Whether :meth:`stop` was called."""
+        return self._stop.is_set()
+
     def start(self) -> PtyEmulator:
         """Serve in a daemon thread."""
         self._thread = threading.Thread(target=self.serve, name="ptz-emulator", daemon=True)

@@ -24,7 +24,7 @@ import numpy as np
 from annotated_types import Len
 from pydantic import Field, model_validator
 
-from omnijax.config import Pos, Section, validate
+from omnijax.config import Degrees, Section, validate, within
 from runtime.files import read_toml
 
 #: Where the shipped profiles live (``configs/devices`` of the checkout).
@@ -44,18 +44,23 @@ class ProfileError(ValueError):
     """A device profile that cannot be used (one line: file, key, what was expected)."""
 
 
-Range = Annotated[list[float], Len(2, 2)]
+Range = Annotated[list[Degrees], Len(2, 2)]
 Direction = Literal[-1, 1]
+#: Times of the link and the lens (s): longer than any camera takes.
+Seconds = Annotated[float, within(0.0, 3600.0, "seconds", open_low=True, why="an hour")]
 
 
 class AxisSection(Section):
     """One rotation axis in the device's own degrees."""
 
     limits_deg: Range = Field(description="lowest and highest reachable angle, device degrees")
-    units_per_deg: Pos = Field(description="device position units per degree")
+    units_per_deg: Annotated[float, within(0.0, 1e4, "units per degree", open_low=True)] = Field(
+        description="device position units per degree")
     speed: int = Field(0, ge=0, description="VISCA speed code sent with absolute moves (unused by Pelco-D)")
     max_speed: int = Field(0, ge=0, description="VISCA: highest speed code the device accepts")
-    max_speed_deg_s: Pos = Field(description="slew rate at the highest speed code, deg/s")
+    max_speed_deg_s: Annotated[float, within(0.0, 1e4, "degrees per second", open_low=True,
+                                             why="no PTZ turns faster")] = Field(
+        description="slew rate at the highest speed code, deg/s")
 
     @model_validator(mode="after")
     def _check(self):
@@ -80,7 +85,7 @@ class ZoomSection(Section):
 
     magnification: Annotated[list[Annotated[float, Field(ge=1)]], Len(2)]
     position: Annotated[list[Annotated[int, Field(ge=0, le=_MAX_ZOOM_POSITION)]], Len(2)]
-    seconds_full_range: Pos = Field(description="time to drive from wide to tele, s")
+    seconds_full_range: Seconds = Field(description="time to drive from wide to tele, s")
 
     @model_validator(mode="after")
     def _check(self):
@@ -96,20 +101,20 @@ class ZoomSection(Section):
 class MountingSection(Section):
     """How the geometry's pan/tilt map to the device's: ``device = direction * geometry + zero``."""
 
-    pan_zero_deg: float = Field(0.0, description="device pan when the PTZ looks toward the omni camera's axis")
+    pan_zero_deg: Degrees = Field(0.0, description="device pan when the PTZ looks toward the omni camera's axis")
     pan_direction: Direction = Field(1, description="+1: device pan grows with omnijax pan; -1: opposite")
-    tilt_zero_deg: float = Field(0.0, description="device tilt when the PTZ looks level")
+    tilt_zero_deg: Degrees = Field(0.0, description="device tilt when the PTZ looks level")
     tilt_direction: Direction = Field(1, description="+1: device tilt grows upward; -1: downward")
 
 
 class LinkSection(Section):
     """Timing of the serial link (seconds)."""
 
-    ack_timeout_s: Pos = 0.5
-    completion_timeout_s: Pos = 10.0
-    min_interval_s: Annotated[float, Field(ge=0)] = 0.05
-    retry_delay_s: Pos = 0.05
-    reconnect_backoff_s: Annotated[list[Pos], Len(2, 2)] = [0.05, 0.5]
+    ack_timeout_s: Seconds = 0.5
+    completion_timeout_s: Seconds = 10.0
+    min_interval_s: Annotated[float, Field(ge=0, le=3600)] = 0.05
+    retry_delay_s: Seconds = 0.05
+    reconnect_backoff_s: Annotated[list[Seconds], Len(2, 2)] = [0.05, 0.5]
     max_silent: Annotated[int, Field(ge=1)] = 3
 
     @model_validator(mode="after")

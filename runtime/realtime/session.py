@@ -23,6 +23,7 @@ import numpy as np
 
 from omnijax import Rig, build_detector, learn_background
 from omnijax.detection import polar_range
+from runtime.errors import UsageError, interrupted_during
 from runtime.frames import Source
 from runtime.output import dumps, staged_output
 from runtime.realtime.config import LoopConfig
@@ -136,8 +137,6 @@ def learn_from_source(frames_iter, n: int, what: str, step: int = 1):
     """The background from ``n`` readable frames of ``frames_iter``, every ``step``-th (broken ones
     skipped): spacing them out keeps people who stand still for a while out of the background.
     Returns it and the number of frames read."""
-    from runtime.errors import UsageError
-
     got, read = [], 0
     for img in frames_iter:
         read += 1
@@ -176,44 +175,17 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
     # the PTZ driver's and the capture's threads get the interpreter within 1 ms (default 5 ms) of a wake-up
     sys.setswitchinterval(0.001)
     n_bg = background_frames or rig.detection.background_frames
-    W, H = rig.omni.image_size
     t0 = time.monotonic()
-    with staged_output(out) as stage:
-        frames = source.frames()
-        bg, first = learn_from_source(frames, n_bg, source.name, background_step)
-        if bg.mean.shape[:2] != (H, W):
-            from runtime.errors import UsageError
-
-            raise UsageError(f"{source.name}: frames are {bg.mean.shape[1]}x{bg.mean.shape[0]}, "
-                             f"expected {W}x{H} (omni.image_size of the rig)")
-        detector = build_detector(rig)
-        writer = VideoOut(stage, source.fps or 25.0, (W + W // 2, H)) if video else None
-        annot = Annotator(rig, title, foveal, [writer.write] if writer else [])
-        capture = Capture(source, paced=paced, frames=frames, first_index=first, shape=(H, W, 3))
-        loop = RealTimeLoop(rig, detector, bg, capture, driver, profile, config, stage / "log.jsonl",
-                            on_frame=chain_hooks(*hooks, annot if (video or screenshot_at is not None) else None))
-        annot.loop = loop
-
-        def shoot(record, frame, *_):
-            if screenshot_at is not None and loop.counts["frames"] == screenshot_at and annot.last is not None:
-                cv2.imwrite(str(stage / "view.png"), cv2.cvtColor(annot.last, cv2.COLOR_RGB2BGR))
-            return {}
-
-        recorder = VideoOut(stage, source.fps or 25.0, (W, H), "omni", replay=True) if record else None
-
-        def rec(record_, frame, *_):
-            if recorder is not None:
-                recorder.write(frame.image)
-            return {}
-
-        loop.on_frame = chain_hooks(loop.on_frame, shoot, rec)
-        blank_dets = loop.warm_up()
-        if video or screenshot_at is not None:
-            annot.warm_up(np.zeros((H, W, 3), np.uint8), blank_dets)
+    with staged_output(out) as stage, interrupted_during("while writing the outputs"):
+        with interrupted_during("during start-up"):
+            loop, annot, writer, recorder, first = _start(
+                rig, source, stage, driver=driver, profile=profile, config=config, paced=paced, n_bg=n_bg,
+                background_step=background_step, video=video, record=record, title=title, foveal=foveal,
+                hooks=hooks, screenshot_at=screenshot_at)
         setup_s = time.monotonic() - t0
         loop.install_signal_handlers()
         try:
-            with capture:
+            with loop.capture:
                 loop.run()
         finally:
             loop.restore_signal_handlers()
@@ -222,15 +194,54 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
                 if w is not None:
                     w.close()
         summary = loop.summary()
+        view = stage / "view.png"
         summary.update({"source": source.name, "setup_s": setup_s, "background_frames": n_bg,
                         "background_step": background_step, "first_frame": first, "ptz_homed": homed,
                         "outputs": {"log": "log.jsonl", **({"video": writer.name} if writer else {}),
-                                    **({"record": recorder.name} if recorder else {})}})
+                                    **({"record": recorder.name} if recorder else {}),
+                                    **({"view": view.name} if view.is_file() else {})}})
         summary.update(extra or {})
         if finish is not None:
             finish(summary)
         (stage / "summary.json").write_text(dumps(summary) + "\n")
     return summary
+
+
+def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: LoopConfig, paced: bool, n_bg: int,
+           background_step: int, video: bool, record: bool, title: str, foveal, hooks: tuple,
+           screenshot_at: int | None):
+    """Start-up of :func:`run_session`: the background, the detector, the writers, the loop, compiled."""
+    W, H = rig.omni.image_size
+    frames = source.frames()
+    bg, first = learn_from_source(frames, n_bg, source.name, background_step)
+    if bg.mean.shape[:2] != (H, W):
+        raise UsageError(f"{source.name}: frames are {bg.mean.shape[1]}x{bg.mean.shape[0]}, "
+                         f"expected {W}x{H} (omni.image_size of the rig)")
+    detector = build_detector(rig)
+    writer = VideoOut(stage, source.fps or 25.0, (W + W // 2, H)) if video else None
+    annot = Annotator(rig, title, foveal, [writer.write] if writer else [])
+    capture = Capture(source, paced=paced, frames=frames, first_index=first, shape=(H, W, 3))
+    loop = RealTimeLoop(rig, detector, bg, capture, driver, profile, config, stage / "log.jsonl",
+                        on_frame=chain_hooks(*hooks, annot if (video or screenshot_at is not None) else None))
+    annot.loop = loop
+
+    def shoot(record, frame, *_):
+        if screenshot_at is not None and loop.counts["frames"] == screenshot_at and annot.last is not None:
+            cv2.imwrite(str(stage / "view.png"), cv2.cvtColor(annot.last, cv2.COLOR_RGB2BGR))
+        return {}
+
+    recorder = VideoOut(stage, source.fps or 25.0, (W, H), "omni", replay=True) if record else None
+
+    def rec(record_, frame, *_):
+        if recorder is not None:
+            recorder.write(frame.image)
+        return {}
+
+    loop.on_frame = chain_hooks(loop.on_frame, shoot, rec)
+    blank_dets = loop.warm_up()
+    if video or screenshot_at is not None:
+        annot.warm_up(np.zeros((H, W, 3), np.uint8), blank_dets)
+    return loop, annot, writer, recorder, first
 
 
 def read_state(path: Path) -> dict | None:

@@ -90,7 +90,7 @@ def test_cli_bad_config_exits_2_with_one_line(tmp_path, capsys):
     out, err = capsys.readouterr()
     assert code == 2 and out == ""
     lines = err.strip().splitlines()
-    assert len(lines) == 1 and "omni.H_o" in lines[0] and "greater than 0" in lines[0]
+    assert len(lines) == 1 and "omni.H_o" in lines[0] and "expected metres in (0, 1000]" in lines[0]
 
 
 @pytest.mark.parametrize("content,expect", [
@@ -119,7 +119,8 @@ def test_ocamcalib_rig_reads_its_calibration(tmp_path):
 
     calib = shared_data("catadioptric_office", "calib_results.txt")
     d = paper_dict()
-    d["omni"] = {"model": "ocamcalib", "calib_file": str(calib), "H_o": 2.7, "sigma_H_o": 0.01}
+    d["omni"] = {"model": "ocamcalib", "calib_file": str(calib), "H_o": 2.7, "sigma_H_o": 0.01,
+                  "sigma_r_m": 0.5}
     rig = parse_rig(d, source="ocam.toml", read_text=lambda p: open(p).read())
     assert rig.omni.image_size == (1920, 1080)  # 1300 wide plus the 300 + 320 cropped columns
     np.testing.assert_allclose(np.asarray(rig.omni.center), [674.318875 + 300, 545.872616])
@@ -128,7 +129,8 @@ def test_ocamcalib_rig_reads_its_calibration(tmp_path):
 
 def test_ocamcalib_missing_file_is_one_line(tmp_path):
     d = paper_dict()
-    d["omni"] = {"model": "ocamcalib", "calib_file": "nowhere.txt", "H_o": 2.7, "sigma_H_o": 0.01}
+    d["omni"] = {"model": "ocamcalib", "calib_file": "nowhere.txt", "H_o": 2.7, "sigma_H_o": 0.01,
+                  "sigma_r_m": 0.5}
 
     def read_text(p):
         return (tmp_path / p).read_text()

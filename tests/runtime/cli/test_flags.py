@@ -82,7 +82,7 @@ def test_loop_settings_are_the_flags_of_run_and_demo():
 
 @pytest.mark.parametrize("flag,value,expect", [
     ("--dwell", "-1", "--dwell: expected seconds >= 0, got -1.0"),
-    ("--dead-zone-sd", "nan", "--dead-zone-sd: expected a number of standard deviations >= 0, got nan"),
+    ("--dead-zone-sd", "-0.5", "--dead-zone-sd: expected a number of standard deviations >= 0, got -0.5"),
     ("--max-seconds", "0", "--max-seconds: expected seconds > 0, got 0.0"),
     ("--max-frames", "0", "--max-frames: expected frames > 0, got 0"),
 ])

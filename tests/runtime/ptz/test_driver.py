@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from runtime.cli import main
-from runtime.ptz import Faults, PtyEmulator, PtzDriver, PtzError, parse_profile
+from runtime.ptz import Faults, PtyEmulator, PtzDriver, PtzError, PtzPortError, parse_profile
 from tests.paths import ROOT
 from tests.runtime.ptz.helpers import profile_mapping, quick_profile, wait_for
 
@@ -192,9 +192,11 @@ def test_clamping_is_logged_when_it_starts_and_stops(caplog):
 
 def test_unusable_ports_are_one_line_errors(tmp_path):
     profile = quick_profile("visca")
-    with pytest.raises(PtzError, match="not a usable serial port URL"):
+    with pytest.raises(PtzPortError, match="not a usable serial port URL"):
         PtzDriver("nosuch://x", profile).connect()
-    with pytest.raises(PtzError, match="no visca camera within") as exc:
+    with pytest.raises(PtzPortError, match="expected HOST:PORT"):
+        PtzDriver("socket://localhost", profile).connect()
+    with pytest.raises(PtzPortError, match="no such serial device") as exc:
         PtzDriver(str(tmp_path / "ttyUSB9"), profile).connect(timeout=0.5)
     assert "\n" not in str(exc.value)
     with pytest.raises(PtzError, match="no visca camera within"):
@@ -242,7 +244,9 @@ def test_ptz_command_sends_a_target_and_reports_the_position(capsys):
 @pytest.mark.parametrize("args,code,expect", [
     (["--ptz", "loop://", "--pan-deg", "10"], 2, "give all three"),
     (["--ptz", "loop://", "--ptz-profile", "nowhere"], 2, "no such device profile"),
-    (["--ptz", "/nonexistent/ttyUSB0", "--timeout", "0.5"], 1, "no visca camera within"),
+    (["--ptz", "/nonexistent/ttyUSB0", "--timeout", "0.5"], 2, "--ptz: /nonexistent/ttyUSB0: no such serial device"),
+    (["--ptz", "bogus://x"], 2, "--ptz: bogus://x: not a usable serial port URL"),
+    (["--ptz", "loop://", "--timeout", "0.5"], 1, "no visca camera within"),
     (["--ptz", "loop://", "--wait", "0"], 2, "--wait: expected a positive"),
 ])
 def test_ptz_command_errors(args, code, expect):

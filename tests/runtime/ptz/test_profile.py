@@ -89,7 +89,10 @@ def _bad(mutate) -> dict:
     (lambda m: m.update(protocol="rs485"), "protocol"),
     (lambda m: m["mounting"].update(pan_direction=2), "mounting.pan_direction"),
     (lambda m: m["link"].update(reconnect_backoff_s=[3.0, 1.0]), "reconnect_backoff_s"),
-    (lambda m: m["pan"].update(limits_deg=[-3000.0, 3000.0]), "at most 360"),
+    (lambda m: m["pan"].update(limits_deg=[-200.0, 200.0]), "at most 360"),
+    (lambda m: m["pan"].update(limits_deg=[-3000.0, 3000.0]), "pan.limits_deg.0: expected degrees in [-360, 360]"),
+    (lambda m: m["tilt"].update(max_speed_deg_s=float("inf")), "tilt.max_speed_deg_s: Input should be a finite"),
+    (lambda m: m["mounting"].update(pan_zero_deg=1e300), "mounting.pan_zero_deg: expected degrees"),
 ])
 def test_bad_profiles_are_one_line_errors(mutate, expect):
     with pytest.raises(ProfileError) as exc:
