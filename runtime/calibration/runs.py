@@ -272,6 +272,14 @@ def calibrated_toml(config_path: Path, out_dir: Path, rig: Rig, values: np.ndarr
     _set(fov, "sigma_theta_c_deg", _sig(math.degrees(s["theta_c"])))
     _set(fov, "H_f", _num(v["H_f"], 5))
     _set(fov, "sigma_H_f", _sig(s["H_f"]))
+    layout = doc.get("layout")
+    if layout is not None and "H_f" in layout and "H_o" not in layout:
+        # The optimiser's H_f range stops at the omni camera: a fitted H_o a few mm below the
+        # nominal one must not leave the range reaching above it (the rig would be refused).
+        top = math.floor(v["H_o"] * 1e5) / 1e5
+        low, high = (float(b) for b in layout["H_f"])
+        if high > top:
+            _set(layout, "H_f", [low, top])
     lines = "".join(f"# {line}\n" for line in header.splitlines())
     return lines + tomlkit.dumps(doc)
 

@@ -185,7 +185,7 @@ BAD_LAYOUT = [
     ({"vary": ["D_c", "D_c"]}, "vary must not repeat"),
     ({"vary": []}, "layout.vary"),
     ({"D_c": [3.0, 1.0]}, "D_c must be [low, high]"),
-    ({"D_c": [-1.0, 1.0]}, "D_c bounds must be >= 0"),
+    ({"D_c": [-1.0, 1.0]}, "layout.D_c.0: expected metres in [0, "),
     ({"H_f": [0.0, 2.0]}, "H_f bounds must be > 0"),
     ({"theta_c_deg": [-200.0, 200.0]}, "at most 360 deg"),
     ({"vary": ["D_c", "H_o"]}, "H_o bounds [low, high] are required"),

@@ -264,7 +264,7 @@ def test_bad_frame_and_arguments_exit_2(tmp_path, capsys):
     for args, expect in (
         (["--frame", frame, "--observations", EXAMPLE], "the rig's omni.image_size is 640x480"),
         (["--frame", tmp_path / "none.png", "--observations", EXAMPLE], "cannot read"),
-        (["--observations", tmp_path / "none.json"], "no such file"),
+        (["--observations", tmp_path / "none.json"], "no such observations file"),
         (["--simulate", "5", "--positions", "2"], "--positions"),
         (["--simulate", "5", "--heights", "1.5"], "--heights"),
         ([], "expected --observations"),

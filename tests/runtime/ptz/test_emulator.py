@@ -207,7 +207,7 @@ def test_emulator_command_contract(tmp_path, protocol):
     (["--protocol", "visca", "--ptz-profile", "nowhere.toml"], "no such device profile"),
     (["--protocol", "visca", "--faults", "fire=0.5"], "unknown fault 'fire'"),
     (["--protocol", "visca", "--faults", "drop=2"], "probability in [0, 1]"),
-    (["--protocol", "visca", "--state-file", "/no/such/dir/s.json"], "no such directory"),
+    (["--protocol", "visca", "--state-file", "/no/such/dir/s.json"], "no such folder"),
 ])
 def test_emulator_command_bad_input_exits_2(args, expect):
     proc = _start(*args)
