@@ -92,12 +92,14 @@ def read_json(path: str | Path, kind: str, error: type[Exception] = ConfigError)
         raise error(f"{path}: not valid JSON: {exc}") from None
 
 
-def load_rig(path: str | Path, overrides: dict[str, dict] | None = None) -> Rig:
+def load_rig(path: str | Path, overrides: dict[str, dict] | None = None,
+             flags: dict[str, str] | None = None) -> Rig:
     """Load and validate a rig file; files it names are read relative to it.
 
     ``overrides`` ({section: {key: value}}, e.g. from command-line flags) replace
     the file's keys before validation, so they are checked like the file's own
-    and a bad one is named by its dotted key ("... (with command-line overrides)").
+    and a bad one is named by its dotted key ("... (with command-line overrides)"), and by its
+    flag where ``flags`` ({"section.key": "--flag"}) names the flag that set it.
     """
     path = Path(path)
     base = path.parent
@@ -112,7 +114,16 @@ def load_rig(path: str | Path, overrides: dict[str, dict] | None = None) -> Rig:
             if keys:
                 data[section] = {**data.get(section, {}), **keys}
                 source = f"{path} (with command-line overrides)"
-    rig = parse_rig(data, source=source, read_text=calib_text)
+    try:
+        rig = parse_rig(data, source=source, read_text=calib_text)
+    except ConfigError as exc:
+        msg = str(exc)
+        for key, flag in (flags or {}).items():
+            section, name = key.split(".", 1)
+            given = (overrides or {}).get(section, {}).get(name) is not None
+            if given and (key in msg or f"{section}: {name} " in msg):
+                raise ConfigError(f"{flag}: {msg}") from None
+        raise
     try:
         polar_range(rig)  # a rig that cannot see its own room is refused here, before any work
     except ConfigError as exc:

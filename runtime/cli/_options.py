@@ -110,6 +110,16 @@ def enable_cache(args) -> str | None:
         return None
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
     path = Path(args.cache_dir) if args.cache_dir else base / "omnijax" / "xla"
+    if args.cache_dir:  # a folder the user names must be usable; the default one is best effort (JAX warns)
+        from runtime.errors import UsageError
+
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UsageError(f"--cache-dir: cannot create {path} ({exc.strerror}); expected a folder that can "
+                             "be written, or --no-cache") from None
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise UsageError(f"--cache-dir: {path} cannot be written; expected a writable folder, or --no-cache")
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
     return str(path)

@@ -87,7 +87,8 @@ def _learn(frames_iter, n: int, what: str):
         if len(frames) == n:
             break
     if len(frames) < n:
-        raise UsageError(f"{what}: only {len(frames)} frames, expected at least {n} to learn the background")
+        raise UsageError(f"{what}: only {len(frames)} frames, expected at least {n} to learn the background "
+                         "(--background-frames)")
     return np.stack(frames)
 
 

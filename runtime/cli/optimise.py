@@ -189,7 +189,8 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     overrides = {key: getattr(args, flag) for flag, key in OVERRIDES.items() if getattr(args, flag) is not None}
     cache = enable_cache(args)
-    rig = load_rig(args.config, overrides={"layout": overrides})
+    flags = {f"layout.{key}": "--" + flag.replace("_", "-") for flag, key in OVERRIDES.items()}
+    rig = load_rig(args.config, overrides={"layout": overrides}, flags=flags)
 
     import jax
 

@@ -140,6 +140,10 @@ def run(args: argparse.Namespace) -> int:
     if not 0 < args.rel_tol < 1:
         raise UsageError(f"--rel-tol: expected a number in (0, 1), got {args.rel_tol}")
     rig = load_rig(args.config)
+    rim = float(rig.omni.rim)
+    if args.foot[0] > rim:
+        raise UsageError(f"--foot: R_F = {args.foot[0]:g} px lies beyond the omni image's rim ({rim:g} px, omni.rim); "
+                         "expected a radius where the mirror images the floor")
     rep = variance_report(rig, args.foot[0], args.foot[1], args.method, args.sigma_rf, sigma_theta,
                           args.rel_tol, args.seed)
     print(dumps(rep) if args.json else _table(rep))

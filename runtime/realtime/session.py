@@ -145,7 +145,8 @@ def learn_from_source(frames_iter, n: int, what: str, step: int = 1):
         if len(got) == n:
             break
     if len(got) < n:
-        raise UsageError(f"{what}: only {len(got)} readable frames, expected at least {n} to learn the background")
+        raise UsageError(f"{what}: only {len(got)} readable frames, expected at least {n} to learn the background "
+                         "(--background-frames)")
     return learn_background(np.stack(got)), read
 
 

@@ -320,3 +320,27 @@ def test_sigterm_while_working_ends_with_130_and_nothing_written(tmp_path):
     assert proc.returncode == 130, err
     assert lines == ["omnijax render: interrupted by SIGTERM; nothing written to o"], err
     nothing_left(tmp_path)
+
+
+# ------------------------------------------------------------------------------------------
+# Holes the harness still found after the first round (run on d86107d)
+# ------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("flag,value", [("--grid-step-m", "0"), ("--starts", "0"), ("--landscape", "100000"),
+                                        ("--vary", "D_c D_c")])
+def test_optimise_override_is_named_by_its_flag(capsys, tmp_path, flag, value):
+    code = main(["optimise", "--config", PAPER, "--out", str(tmp_path / "o"), flag, *value.split()])
+    one_line(capsys, code, flag)
+    nothing_left(tmp_path)
+
+
+def test_variance_foot_beyond_the_rim_is_refused(capsys):
+    code = main(["variance", "--config", PAPER, "--foot", "1e300", "0"])
+    one_line(capsys, code, "--foot", "omni.rim")
+
+
+def test_cache_dir_that_cannot_be_made_is_refused_before_work(capsys, tmp_path):
+    code = main(["optimise", "--config", PAPER, "--out", str(tmp_path / "o"), "--cache-dir", "/dev/null/x"])
+    one_line(capsys, code, "--cache-dir", "/dev/null/x")
+    nothing_left(tmp_path)
