@@ -14,8 +14,8 @@ SOURCE is a camera index (0, 1, ...), a network stream (rtsp://..., http://... M
 read through OpenCV's FFmpeg; when it drops, it is reopened with back-off, 0.1 s
 doubling to 2 s, for up to 60 s, and the reconnects are counted in summary.json
 stream {reconnects, drops, failed_opens, outage_s}), a video file or a folder of
-images. A capture
-thread keeps only the newest frame (late frames are dropped and counted). The
+images. A capture thread keeps only the newest frame (late frames are dropped and
+counted). The
 background is learnt from the first frames; then, per frame: detection (jitted),
 tracking (Kalman with optimal assignment, or the paper's nearest neighbour), the
 target (round-robin with a dwell time, people whose face was not yet captured
