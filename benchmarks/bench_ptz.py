@@ -268,6 +268,7 @@ def calibrate_section(latency_ms: float, moves: int) -> dict:
 
 
 def main() -> None:
+    global PROTOCOLS
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sections = ("roundtrip", "fuzz", "unplug", "latency", "fuzz-ip", "calibrate")
     ap.add_argument("--only", nargs="+", choices=sections, default=list(sections))
@@ -284,7 +285,6 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
-    global PROTOCOLS
     PROTOCOLS = tuple(args.protocols)
     runs = {"roundtrip": lambda: roundtrip(args.targets, args.seed), "fuzz": lambda: fuzz(args.streams, args.seed),
             "unplug": lambda: unplug(args.trials, args.outage, args.seed), "latency": lambda: latency(args.commands),
