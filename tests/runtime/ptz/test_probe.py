@@ -6,6 +6,7 @@ wide enough for a loaded machine (the samples are stamped by this process's cloc
 
 from __future__ import annotations
 
+import math
 import tomllib
 
 import numpy as np
@@ -101,3 +102,19 @@ def test_cli_probe_of_a_silent_camera_is_exit_1(capsys):
         assert main(["ptz", "probe", "--ptz", url, "--timeout", "0.5"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no visca camera within 0.5 s" in err[0]
+
+
+def test_the_loop_adds_the_profiles_command_latency_to_the_slew_time():
+    """What ``calibrate`` writes is what the loop predicts arrival with: latency + slowest axis."""
+    from types import SimpleNamespace
+
+    from runtime.ptz import parse_profile
+    from runtime.realtime.loop import RealTimeLoop
+    from tests.runtime.ptz.helpers import profile_mapping
+
+    m = profile_mapping("visca")
+    m["link"] = {**m.get("link", {}), "command_latency_s": 0.25}
+    profile = parse_profile(m)
+    state = SimpleNamespace(profile=profile, sent=(0.0, 0.0, 1.0))
+    t = RealTimeLoop._slew_time(state, (math.radians(50.0), 0.0, 1.0))
+    assert t == pytest.approx(0.25 + 50.0 / profile.pan.max_speed_deg_s)
