@@ -89,14 +89,26 @@ def gum_second_order(f, x: Float[Array, " n"], sigma: Float[Array, " n"]) -> Flo
 
     JCGM 100, 5.1.2 note, extended to a covariance: ``cov(a, b) = J_a Sigma J_b^T +
     sum_ij [H_a,ij H_b,ij / 2 + (J_a,i T_b,ijj + J_b,i T_a,ijj) / 2] sigma_i^2 sigma_j^2``,
-    with ``H`` from ``jax.hessian`` and ``T`` its ``jax.jacfwd``. Exact for quadratic ``f``.
+    with ``H`` from ``jax.hessian``. Exact for quadratic ``f``.
+
+    The third derivatives enter only as ``sum_ij J_a,i v_i T_b,ijj v_j``: the derivative of
+    the variance-weighted Laplacian ``L_b = sum_j v_j d^2 f_b / dx_j^2`` along the direction
+    ``J_a diag(v)``. So ``L`` is built from one second-order jvp per input and differentiated
+    along the m output directions only (m n third-order passes instead of the full
+    ``m n^3`` tensor of ``jacfwd(hessian)``, which was most of the time).
     """
     v = sigma**2
     J = jax.jacfwd(f)(x)
     H = jax.hessian(f)(x)
-    T_ijj = jnp.einsum("aijj->aij", jax.jacfwd(jax.hessian(f))(x))
-    second = 0.5 * jnp.einsum("aij,bij,i,j->ab", H, H, v, v)
-    third = jnp.einsum("ai,bij,i,j->ab", J, T_ijj, v, v)
+    eye = jnp.eye(x.shape[0], dtype=x.dtype)
+
+    def laplacian(y):
+        d2 = jax.vmap(lambda e: jax.jvp(lambda z: jax.jvp(f, (z,), (e,))[1], (y,), (e,))[1])(eye)  # (n, m)
+        return (v[:, None] * d2).sum(0)
+
+    third = jax.vmap(lambda w: jax.jvp(laplacian, (x,), (w,))[1])(J * v)  # (m, m): [a, b]
+    Hv = H * v[None, :, None] * v[None, None, :]
+    second = 0.5 * (H[:, None] * Hv[None, :]).sum((-1, -2))
     return _quadratic_form(J, sigma) + second + 0.5 * (third + third.T)
 
 

@@ -97,7 +97,8 @@ def load_ptz_profile(name: str | None, protocol: str | None = None):
 
 def add_cache_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cache-dir", metavar="DIR", default=None,
-                        help="JAX compilation cache (default: $XDG_CACHE_HOME/omnijax/xla or ~/.cache/omnijax/xla)")
+                        help="JAX compilation cache (default: $JAX_COMPILATION_CACHE_DIR if set, else "
+                             "$XDG_CACHE_HOME/omnijax/xla or ~/.cache/omnijax/xla)")
     parser.add_argument("--no-cache", action="store_true", help="compile everything afresh, cache nothing")
 
 
@@ -111,7 +112,7 @@ def enable_cache(args) -> str | None:
     if args.no_cache:
         return None
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    path = Path(args.cache_dir) if args.cache_dir else base / "omnijax" / "xla"
+    path = Path(args.cache_dir or os.environ.get("JAX_COMPILATION_CACHE_DIR") or base / "omnijax" / "xla")
     if args.cache_dir:  # a folder the user names must be usable; the default one is best effort (JAX warns)
         from runtime.errors import UsageError
 

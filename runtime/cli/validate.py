@@ -31,13 +31,15 @@ Writes DIR/report.json and PNG maps beside it:
            rig's): containment.png
 
 and DIR/report.md, every table and figure with a sentence of what it shows.
+Compiled programs are cached in --cache-dir (JAX's persistent compilation
+cache), so later runs skip most of the compilation; --no-cache compiles afresh.
 The report's ptz keys summarise where the person is at least --min-distance
 from the PTZ's foot; per_quantity says where each worst case is.
 """
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from runtime.cli._options import deprecated_alias
+    from runtime.cli._options import add_cache_options, deprecated_alias
     from runtime.settings import finite_float
 
     p = sub.add_parser("validate", help=HELP, description=DESCRIPTION,
@@ -63,6 +65,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="scenario TOML, or a name in configs/scenarios, for the rendered frames (its room, lamps, "
                         "furniture, sensor; the rig is --config's); default: a plain room on the rig's outline")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    add_cache_options(p)
     p.set_defaults(func=run)
 
 
@@ -97,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
     import jax
     from tqdm import tqdm
 
+    from runtime.cli._options import enable_cache
     from runtime.errors import UsageError
     from runtime.files import load_rig
     from runtime.output import dumps, staged_output
@@ -121,6 +125,7 @@ def run(args: argparse.Namespace) -> int:
     rel_tol = args.rel_tol if args.rel_tol is not None else (0.03 if args.quick else 0.01)
 
     scenario, scenario_name = _scenario(args, rig)
+    enable_cache(args)
 
     t0 = time.perf_counter()
     report: dict = {"config": str(args.config), "camera_model": rig.omni.model, "quick": args.quick,
