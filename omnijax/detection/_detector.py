@@ -133,24 +133,28 @@ def line_change(detector: Detector, frame: UInt8[Array, "H W 3"], lines: LineBac
 
 
 def _other_blob(polar, i, significant) -> Array:
-    """Distance (px of image radius) from hypothesis ``i``'s inner end to the nearest end of another
-    blob on the same centre line: three consecutive significant samples (noise alone makes one such
-    run in several thousand profiles at x_f = 0.01) more than :data:`BLOB_GAP` samples before the person or
-    beyond it; 0 if there is none. Two people (or a person and a ghost) at one azimuth and different
-    radii make one sector, and the foot estimate may be either's."""
+    """Distance (px of image radius) from hypothesis ``i``'s inner end to another blob on the same
+    centre line, 0 if there is none: three consecutive significant samples (noise alone makes one
+    such run in several thousand profiles at x_f = 0.01) more than :data:`BLOB_GAP` samples before
+    the person, or beyond the person's outer end by more than :data:`BLOB_GAP` samples plus
+    :data:`TALLER` of its extent (a taller person than the prior's mean is not a second blob). Two
+    people (or a person and a ghost) at one azimuth and different radii make one sector, and the
+    foot estimate may be either's."""
     n = significant.shape[-1]
     run = significant & jnp.roll(significant, -1) & jnp.roll(significant, -2)
     r = jnp.arange(n)
     run = run & (r < n - 2)
+    out = polar.hyp_out[i]
     inner = run & (r < i - BLOB_GAP)
-    outer = run & (r >= polar.hyp_out[i] + BLOB_GAP)
+    outer = run & (r >= out + BLOB_GAP + TALLER * (out - i))
     d_in = jnp.where(inner.any(), polar.radii[i] - polar.radii[jnp.argmax(inner)], 0.0)
     d_out = jnp.where(outer.any(), polar.radii[jnp.argmax(outer)] - polar.radii[i], 0.0)
     return jnp.maximum(d_in, d_out)
 
 
-#: Samples between a person's hypothesis and another blob on its centre line (:func:`_other_blob`).
-BLOB_GAP = 3
+#: Samples between a person's hypothesis and another blob on its centre line, and the share of the
+#: person's extent a taller person may reach beyond it (:func:`_other_blob`).
+BLOB_GAP, TALLER = 3, 0.2
 
 
 def _foot_sigmas(detector: Detector, i, contrast, width, other=0.0) -> tuple[Array, Array]:
@@ -180,7 +184,7 @@ def _foot_sigmas(detector: Detector, i, contrast, width, other=0.0) -> tuple[Arr
     one = polar.hyp_width[i]
     excess = jnp.maximum(width - one - step, 0.0)
     deficit = jnp.maximum(one - width - step, 0.0)
-    sigma_theta = jnp.sqrt(step**2 / 24 + excess**2 / 4 + deficit**2 / 12)
+    sigma_theta = jnp.sqrt(step**2 / 24 + excess**2 / 4 + deficit**2 / 12 + jnp.where(other > 0, width**2 / 12, 0.0))
     extent = (polar.hyp_out[i] - i).astype(jnp.float64)
     ok = polar.hyp_ok
     first, last = jnp.argmax(ok), ok.shape[0] - 1 - jnp.argmax(ok[::-1])
