@@ -118,6 +118,7 @@ def fit_component(e: np.ndarray, s: np.ndarray) -> tuple[float, float, float]:
 def nees_figures(e: np.ndarray, s: np.ndarray) -> dict:
     n = (e / s) ** 2
     return {"n": int(n.size), "mean": float(n.mean()) if n.size else None,
+            "median": float(np.median(n)) if n.size else None,
             "p_over_6.63": float(np.mean(n > NEES_99)) if n.size else None}
 
 
