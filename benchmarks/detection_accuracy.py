@@ -5,7 +5,8 @@
   a lamp switching off and on; background learnt from the first 30 frames),
   chromaticity against grey levels, against x_f (with a Clopper-Pearson 95 % bound);
 - the miss rate of people (inside the polar range, foot visible) against x_m, and the
-  normalised estimation error squared of r_f and theta_f over the matched detections,
+  normalised estimation error squared of r_f and theta_f over the matched detections (their
+  sigmas under the sigma rule, :func:`omnijax.aiming.detection_sigmas`),
   all of them and the isolated ones (no other person within 0.35 rad).
 
 Run: `.venv/bin/python benchmarks/detection_accuracy.py --json out/detection_accuracy.json`
@@ -34,6 +35,7 @@ from omnijax import (
     build_detector,
     change_image,
     detect,
+    detection_sigmas,
     learn_background,
     line_background,
     polar_range,
@@ -87,6 +89,7 @@ def run_scenario(name: str, n_frames: int, measure: str, seed: int, stride: int 
         lines = line_background(det, bg)
         tr = f.truth
         valid = np.nonzero(np.asarray(d.valid))[0]
+        rule_r, rule_t = (np.asarray(a) for a in detection_sigmas(rig, d.sigma_r_f, d.sigma_theta_f))
         used = set()
         th_all = np.asarray(tr.theta_f)
         for p in range(th_all.shape[0]):
@@ -106,8 +109,8 @@ def run_scenario(name: str, n_frames: int, measure: str, seed: int, stride: int 
             row = {"isolated": min(others, default=math.inf) > 0.35, "found": bk is not None}
             if bk is not None:
                 used.add(bk)
-                row.update(dr=float(d.r_f[bk]) - float(tr.r_f[p]), sr=float(d.sigma_r_f[bk]),
-                           dth=wrap_pi(float(d.theta_f[bk]) - th), st=float(d.sigma_theta_f[bk]))
+                row.update(dr=float(d.r_f[bk]) - float(tr.r_f[p]), sr=float(rule_r[bk]),
+                           dth=wrap_pi(float(d.theta_f[bk]) - th), st=float(rule_t[bk]))
             people.append(row)
         false += len(valid) - len(used)
         frames_with_false += int(len(valid) > len(used))

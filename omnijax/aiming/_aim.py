@@ -5,8 +5,8 @@ is section 4.8, the propagation 4.10, the zoom 4.11).
 The stages, written once and used by the loop, validation, calibration and the optimiser:
 
 1. :func:`detection_sigmas`, the sigma rule: a detection's (sigma_r_f, sigma_theta_f) are the
-   detector's own, floored by the rig's ``[detection]`` defaults; without the detector's, the
-   defaults.
+   detector's own, scaled and widened by the rig's fitted ``[detection]`` coefficients; without
+   the detector's, the rig's defaults.
 2. :func:`floor_from_detections`: detections -> floor positions (m) with their 2 x 2 covariance
    under the sigma rule (the tracker's measurements; eq 1, autodiff).
 3. :func:`aim_from_image`, the core: the foot at (r_f, theta_f) with a full 2 x 2 covariance joins
@@ -73,13 +73,19 @@ def _rules(rig: Rig, rules) -> tuple[str, ...]:
 def detection_sigmas(rig: Rig, sigma_r_f=None, sigma_theta_f=None) -> tuple[Array, Array]:
     """The sigma rule: the (sigma_r_f px, sigma_theta_f rad) handed to the covariance for a detection.
 
-    The detector's sigmas describe the profile's noise only (sigma_r_f is 0 for a clear person);
-    the rig's ``[detection]`` sigmas are their floor, for what the foot model misses (two people in
-    a sector, partial occlusion, the image edge). ``None``: the rig's defaults. Broadcasts.
+    ``sqrt((gain * detector's sigma)^2 + extra^2)`` per coordinate, with the rig's ``[detection]``
+    ``sigma_gain_*`` and ``sigma_extra_*``: the detector's sigmas carry each detection's quality (the
+    foot's Monte Carlo at its contrast and radius; a sector wider or narrower than one person there:
+    two people or a ghost in it, partial occlusion; the foot at the sampled range's edge), the gain
+    and the extra term calibrate them against the synthetic world's truth
+    (benchmarks/fit_detection_sigmas.py; docs/detection.md, "Honest sigmas"). ``None`` (an aim without
+    a detection: the layout optimiser, calibration points): the rig's ``sigma_r_f``,
+    ``sigma_theta_f`` as they are. Broadcasts.
     """
     d = rig.detection
-    s_r = d.sigma_r_f if sigma_r_f is None else jnp.maximum(sigma_r_f, d.sigma_r_f)
-    s_t = d.sigma_theta_f if sigma_theta_f is None else jnp.maximum(sigma_theta_f, d.sigma_theta_f)
+    s_r = d.sigma_r_f if sigma_r_f is None else jnp.hypot(d.sigma_gain_r_f * sigma_r_f, d.sigma_extra_r_f)
+    s_t = (d.sigma_theta_f if sigma_theta_f is None
+           else jnp.hypot(d.sigma_gain_theta_f * sigma_theta_f, d.sigma_extra_theta_f))
     return jnp.asarray(s_r, float), jnp.asarray(s_t, float)
 
 
@@ -167,7 +173,7 @@ def aim(
     """PTZ command for a foot at (``r_f`` px, ``theta_f`` rad) with the sigmas *as given* (``None``:
     the rig's ``[detection]`` defaults), by a chosen propagation method: ``omnijax variance``'s.
 
-    A what-if on the propagation, not a detection: the sigmas are not floored (a detector's
+    A what-if on the propagation, not a detection: the sigma rule is not applied (a detector's
     detections go through :func:`aim_detection`). Vmap it for many people.
     """
     x = rig.input_mean(r_f, theta_f)

@@ -122,8 +122,13 @@ class Sigmas(eqx.Module):
 
 
 class Detection(eqx.Module):
-    """Detection settings: sensor noise, rates, contrast, polar sampling and the sigmas that floor (and
-    default) each detection's (the aim pipeline's sigma rule, :func:`omnijax.aiming.detection_sigmas`).
+    """Detection settings: sensor noise, rates, contrast, polar sampling, the sigma rule's coefficients
+    and the default sigmas of an aim without a detection (:func:`omnijax.aiming.detection_sigmas`).
+
+    The sigma rule: a detection's sigma is ``sqrt((sigma_gain * detector's)^2 + sigma_extra^2)`` per
+    coordinate (``sigma_extra_theta_f`` in rad), fitted by benchmarks/fit_detection_sigmas.py; without
+    a detection (layout optimiser, calibration points, ``omnijax variance``) ``sigma_r_f`` and
+    ``sigma_theta_f`` are used as they are.
 
     ``c_min`` is the smallest per-pixel non-centrality (the Mahalanobis contrast of
     a person's chromaticity against the background) for which ``x_m`` must hold.
@@ -144,6 +149,10 @@ class Detection(eqx.Module):
     background_frames: int = eqx.field(static=True)
     foot_mc_profiles: int = eqx.field(static=True)
     r_max: float | None = eqx.field(static=True, default=None)
+    sigma_gain_r_f: Float[Array, ""] = eqx.field(default=1.0, converter=jnp.asarray)
+    sigma_extra_r_f: Float[Array, ""] = eqx.field(default=0.0, converter=jnp.asarray)
+    sigma_gain_theta_f: Float[Array, ""] = eqx.field(default=1.0, converter=jnp.asarray)
+    sigma_extra_theta_f: Float[Array, ""] = eqx.field(default=0.0, converter=jnp.asarray)
 
 
 class Room(eqx.Module):
@@ -371,9 +380,15 @@ class DetectionSection(Section):
         description="sensor noise per channel, grey levels")
     x_f: Prob = Field(description="false-alarm probability of a background radial line (eq 10)")
     x_m: Prob = Field(description="miss rate per person of contrast >= c_min")
-    sigma_r_f: Pixels = Field(description="floor (and default) of a detection's sigma of the foot radius, px")
+    sigma_r_f: Pixels = Field(description="sigma of the foot radius of an aim without a detection, px")
     sigma_theta_f_deg: PosSigmaDegrees = Field(
-        description="floor (and default) of a detection's sigma of the foot azimuth, deg")
+        description="sigma of the foot azimuth of an aim without a detection, deg")
+    sigma_gain_r_f: Annotated[float, Field(gt=0, le=100)] = Field(
+        1.0, description="sigma rule: factor on the detector's sigma_r_f")
+    sigma_extra_r_f: NonNegPixels = Field(0.0, description="sigma rule: independent foot-radius error, px")
+    sigma_gain_theta_f: Annotated[float, Field(gt=0, le=100)] = Field(
+        1.0, description="sigma rule: factor on the detector's sigma_theta_f")
+    sigma_extra_theta_f_deg: SigmaDegrees = Field(0.0, description="sigma rule: independent azimuth error, deg")
     c_min: Annotated[float, within(0.0, MAX_CONTRAST, "a non-centrality per pixel", open_low=True,
                                    why="more than two 8-bit colours' chromaticities can differ by")] = Field(
         4.0, description="smallest person contrast (non-centrality per pixel) x_m holds for")
@@ -633,6 +648,9 @@ def parse_rig(
         c_min=_a(de.c_min), adapt_rate=_a(de.adapt_rate), min_floor_radius=_a(de.min_floor_radius),
         n_theta=de.n_theta, max_people=de.max_people, background_frames=de.background_frames,
         foot_mc_profiles=de.foot_mc_profiles, r_max=de.r_max,
+        sigma_gain_r_f=_a(de.sigma_gain_r_f), sigma_extra_r_f=_a(de.sigma_extra_r_f),
+        sigma_gain_theta_f=_a(de.sigma_gain_theta_f),
+        sigma_extra_theta_f=_a(math.radians(de.sigma_extra_theta_f_deg)),
     )
     room = Room(outline=_a(f.room.outline), exclude=tuple(_a(p) for p in f.room.exclude))
     return Rig(

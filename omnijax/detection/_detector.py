@@ -132,28 +132,66 @@ def line_change(detector: Detector, frame: UInt8[Array, "H W 3"], lines: LineBac
     return jnp.where(detector.polar.line_ok, d2, 0.0).sum(-1)
 
 
-def _foot_sigmas(detector: Detector, i, contrast, width) -> tuple[Array, Array]:
+def _other_blob(polar, i, significant) -> Array:
+    """Distance (px of image radius) from hypothesis ``i``'s inner end to another blob on the same
+    centre line, 0 if there is none: three consecutive significant samples (noise alone makes one
+    such run in several thousand profiles at x_f = 0.01) more than :data:`BLOB_GAP` samples before
+    the person, or beyond the person's outer end by more than :data:`BLOB_GAP` samples plus
+    :data:`TALLER` of its extent (a taller person than the prior's mean is not a second blob). Two
+    people (or a person and a ghost) at one azimuth and different radii make one sector, and the
+    foot estimate may be either's."""
+    n = significant.shape[-1]
+    run = significant & jnp.roll(significant, -1) & jnp.roll(significant, -2)
+    r = jnp.arange(n)
+    run = run & (r < n - 2)
+    out = polar.hyp_out[i]
+    inner = run & (r < i - BLOB_GAP)
+    outer = run & (r >= out + BLOB_GAP + TALLER * (out - i))
+    d_in = jnp.where(inner.any(), polar.radii[i] - polar.radii[jnp.argmax(inner)], 0.0)
+    d_out = jnp.where(outer.any(), polar.radii[jnp.argmax(outer)] - polar.radii[i], 0.0)
+    return jnp.maximum(d_in, d_out)
+
+
+#: Samples between a person's hypothesis and another blob on its centre line, and the share of the
+#: person's extent a taller person may reach beyond it (:func:`_other_blob`).
+BLOB_GAP, TALLER = 3, 0.2
+
+
+def _foot_sigmas(detector: Detector, i, contrast, width, other=0.0) -> tuple[Array, Array]:
     """``(sigma_r_f, sigma_theta_f)`` of a detection whose foot hypothesis is ``i``.
 
     One upright person's image is symmetric about the foot's azimuth, so the sector's
     centre is unbiased and its error is where the two edges fall inside their lines'
     bins of width ``step``: uniform, ``step^2 / 12`` each, a quarter of their sum for the
     mean. (The paper's alternative, the sector width as a 99 % interval, overstates it
-    about tenfold in the synthetic world: docs/detection.md.) A sector wider than one
-    person there (a vertical cylinder spans ``2 asin(rho / R)``) holds more than the
-    person (two people side by side, a person and a ghost): its centre is then uniform
-    over the excess width, and the centre line may miss the person's axis, so the
-    foot's radius takes a share ``min(excess / width_1, 1)`` of a uniform spread over
-    the person's extent on top of the Monte Carlo ``sigma_r_f``.
+    about tenfold in the synthetic world: docs/detection.md.) The failure modes, by the
+    sector's width against one person's there (a vertical cylinder spans ``2 asin(rho / R)``):
+
+    - wider (two people side by side, a person and a ghost or a shadow): the person sits at
+      one end of the sector, its centre off by half the excess width either way
+      (``excess^2 / 4``; a uniform spread over the excess, ``excess^2 / 12``, is what the
+      synthetic world's merged sectors break: docs/detection.md, "Honest sigmas");
+    - narrower (partly hidden, or only part of a low-contrast person over the threshold):
+      the visible part is anywhere along the person (``deficit^2 / 12``);
+    - either way the centre line may miss the person's axis, so the foot's radius takes a
+      share ``min((excess + deficit) / width_1, 1)`` of a uniform spread over the person's
+      extent on top of the Monte Carlo ``sigma_r_f``; the whole of it when the foot
+      hypothesis is the first or last possible one (the person reaches past the sampled
+      radii: the image's edge or the blind centre).
     """
     polar = detector.polar
     step = 2 * jnp.pi / polar.n_theta
     one = polar.hyp_width[i]
     excess = jnp.maximum(width - one - step, 0.0)
-    sigma_theta = jnp.sqrt(step**2 / 24 + excess**2 / 12)
+    deficit = jnp.maximum(one - width - step, 0.0)
+    sigma_theta = jnp.sqrt(step**2 / 24 + excess**2 / 4 + deficit**2 / 12 + jnp.where(other > 0, width**2 / 12, 0.0))
     extent = (polar.hyp_out[i] - i).astype(jnp.float64)
-    share = jnp.minimum(excess / one, 1.0)
-    sigma_r = jnp.sqrt(foot_sigma_lookup(detector.foot_sigma, i, contrast) ** 2 + share * extent**2 / 12)
+    ok = polar.hyp_ok
+    first, last = jnp.argmax(ok), ok.shape[0] - 1 - jnp.argmax(ok[::-1])
+    edge = (i <= first) | (i >= last)
+    share = jnp.where(edge, 1.0, jnp.minimum((excess + deficit) / one, 1.0))
+    sigma_r = jnp.sqrt(foot_sigma_lookup(detector.foot_sigma, i, contrast) ** 2 + share * extent**2 / 12
+                       + other**2)
     return sigma_r, sigma_theta
 
 
@@ -195,7 +233,8 @@ def locate_feet(detector: Detector, frame: UInt8[Array, "H W 3"], bg: Background
     significant = profiles > th.window
     on = (r[None] >= i[:, None]) & (r[None] < out[:, None])
     valid = sectors.valid & jnp.any(significant & on, axis=-1)
-    sigma_r, sigma_theta = _foot_sigmas(detector, i, contrast, width)
+    other = jax.vmap(lambda k, sig: _other_blob(polar, k, sig))(i, significant)
+    sigma_r, sigma_theta = _foot_sigmas(detector, i, contrast, width, other)
     dets = Detections(
         valid=valid,
         r_f=polar.hyp_r_f[i],

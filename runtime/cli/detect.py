@@ -14,7 +14,8 @@ radial sums and hysteresis sectors (eq 8-10), the windowed profile and the Bayes
 foot estimate (eq 11-12), adapting the background where nothing was detected.
 
 Writes DIR/detections.jsonl (one line per frame: each person's r_f, theta_f, their
-sigmas, contrast, sector edges, foot and head pixels), DIR/overlay_NNNNN.png every
+sigmas under the sigma rule (the detector's own as detector_sigma_*: see the rig's
+[detection] sigma_gain_* / sigma_extra_*), contrast, sector edges, foot and head pixels), DIR/overlay_NNNNN.png every
 --overlay-every frames (sectors red, centre lines green, the person's extent yellow,
 foot cyan, head white) and DIR/summary.json.
 
@@ -103,6 +104,7 @@ def _run_detector(args) -> int:
         adapt_background,
         build_detector,
         detect,
+        detection_sigmas,
         learn_background,
         line_background,
         sector_mask,
@@ -141,13 +143,15 @@ def _run_detector(args) -> int:
                 jax.block_until_ready(dets)
                 t_detect += time.perf_counter() - t0
                 valid = np.asarray(dets.valid)
+                s_r, s_t = (np.asarray(a) for a in detection_sigmas(rig, dets.sigma_r_f, dets.sigma_theta_f))
                 people = []
                 for k in np.nonzero(valid)[0]:
                     r_f, th = float(dets.r_f[k]), float(dets.theta_f[k])
                     foot, head = foot_and_head_pixels(rig, r_f, th)
                     people.append({
-                        "r_f": r_f, "theta_f": th, "sigma_r_f": float(dets.sigma_r_f[k]),
-                        "sigma_theta_f": float(dets.sigma_theta_f[k]), "contrast": float(dets.contrast[k]),
+                        "r_f": r_f, "theta_f": th, "sigma_r_f": float(s_r[k]), "sigma_theta_f": float(s_t[k]),
+                        "detector_sigma_r_f": float(dets.sigma_r_f[k]),
+                        "detector_sigma_theta_f": float(dets.sigma_theta_f[k]), "contrast": float(dets.contrast[k]),
                         "theta_l": float(dets.theta_l[k]), "theta_r": float(dets.theta_r[k]),
                         "r_in": float(dets.r_in[k]), "r_out": float(dets.r_out[k]),
                         "foot_px": list(foot), "head_px": list(head),

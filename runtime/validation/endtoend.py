@@ -9,8 +9,8 @@ an omni frame with fresh sensor noise and runs the detector on it.
   the paper's trials had different people stand at each mark), so the trial-to-trial
   spread comes from detection and the person, not calibration; the prediction is the
   mean over trials of the pointing covariance with each detection's sigmas under the aim
-  pipeline's sigma rule (the detector's sigma_r_f, sigma_theta_f floored by the rig's
-  ``[detection]`` ones, as the loop has them) and the person priors (H_p, R_h),
+  pipeline's sigma rule (the detector's sigma_r_f, sigma_theta_f scaled and widened by the
+  rig's ``[detection]`` coefficients, as the loop has them) and the person priors (H_p, R_h),
   calibration sigmas zero. One person under sensor noise alone hardly moves the estimate
   (0-0.3 px).
 - Table 1 with full propagation: a fresh true rig (:func:`omnijax.draw_true_rig`) and a

@@ -91,30 +91,47 @@ def _sigma_defaults(rig):
 # The sigma rule
 
 
-def test_sigma_rule_floors_the_detectors_sigmas_with_the_rigs(paper_rig):
-    d_r, d_t = _sigma_defaults(paper_rig)
-    s_r, s_t = detection_sigmas(paper_rig, jnp.array([0.0, 0.5 * d_r, 3.0 * d_r]),
-                                jnp.array([2.0 * d_t, 0.0, 0.1 * d_t]))
-    np.testing.assert_array_equal(np.asarray(s_r), [d_r, d_r, 3.0 * d_r])
-    np.testing.assert_array_equal(np.asarray(s_t), [2.0 * d_t, d_t, d_t])
-    s_r, s_t = detection_sigmas(paper_rig)
-    assert (float(s_r), float(s_t)) == (d_r, d_t)
+def _with_rule(rig, gain_r, extra_r, gain_t, extra_t):
+    return eqx.tree_at(lambda r: (r.detection.sigma_gain_r_f, r.detection.sigma_extra_r_f,
+                                  r.detection.sigma_gain_theta_f, r.detection.sigma_extra_theta_f),
+                       rig, tuple(jnp.asarray(v, float) for v in (gain_r, extra_r, gain_t, extra_t)))
+
+
+def test_sigma_rule_scales_the_detectors_sigmas_and_adds_the_extra_term(paper_rig):
+    rig = _with_rule(paper_rig, 1.5, 0.4, 2.0, 0.003)
+    s_r, s_t = detection_sigmas(rig, jnp.array([0.0, 1.0, 30.0]), jnp.array([0.2, 0.0, 0.004]))
+    np.testing.assert_allclose(np.asarray(s_r), np.hypot(1.5 * np.array([0.0, 1.0, 30.0]), 0.4), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(s_t), np.hypot(2.0 * np.array([0.2, 0.0, 0.004]), 0.003), rtol=1e-12)
+    s_r, s_t = detection_sigmas(rig)  # no detection: the rig's defaults as they are
+    assert (float(s_r), float(s_t)) == _sigma_defaults(rig)
+
+
+def test_the_rig_files_carry_fitted_coefficients(paper_rig):
+    """configs/paper.toml holds the coefficients benchmarks/fit_detection_sigmas.py fitted (not the
+    schema's identity defaults), and a detector's sigmas are never reduced below the extra term."""
+    d = paper_rig.detection
+    assert float(d.sigma_gain_theta_f) != 1.0 and float(d.sigma_extra_theta_f) > 0
+    s_r, s_t = detection_sigmas(paper_rig, jnp.zeros(3), jnp.zeros(3))
+    assert np.all(np.asarray(s_r) == float(d.sigma_extra_r_f))
+    assert np.all(np.asarray(s_t) == float(d.sigma_extra_theta_f))
 
 
 def test_floor_measurements_use_the_sigma_rule(paper_rig):
-    """A detector sigma of 0 (a clear person) enters the tracker with the rig's default."""
-    d_r, d_t = _sigma_defaults(paper_rig)
+    """The tracker's measurements carry the rule's sigmas, not the detector's raw ones."""
+    rig = _with_rule(paper_rig, 1.5, 0.4, 2.0, 0.003)
     r_f, th = jnp.array([60.0, 110.0, 140.0]), jnp.array([0.3, -2.0, 2.9])
-    z, R = floor_from_detections(paper_rig, r_f, th, jnp.array([0.0, 4.0, 0.2]), jnp.array([0.0, 0.0, 0.05]))
-    z0, R0 = floor_measurement(paper_rig, r_f, th, jnp.array([d_r, 4.0, d_r]), jnp.array([d_t, d_t, 0.05]))
+    s_r, s_t = jnp.array([0.0, 4.0, 0.2]), jnp.array([0.0, 0.0, 0.05])
+    z, R = floor_from_detections(rig, r_f, th, s_r, s_t)
+    z0, R0 = floor_measurement(rig, r_f, th, jnp.hypot(1.5 * s_r, 0.4), jnp.hypot(2.0 * s_t, 0.003))
     np.testing.assert_array_equal(np.asarray(z), np.asarray(z0))
-    np.testing.assert_array_equal(np.asarray(R), np.asarray(R0))
+    np.testing.assert_allclose(np.asarray(R), np.asarray(R0), rtol=1e-12)
 
 
 def test_a_detection_is_aimed_with_the_rule_sigmas(paper_rig):
     d_r, d_t = _sigma_defaults(paper_rig)
+    s_r, s_t = detection_sigmas(paper_rig, 0.0, 3.0 * d_t)
     a = aim_detection(paper_rig, 100.0, 0.7, 0.0, 3.0 * d_t)
-    b = aim_from_image(paper_rig, 100.0, 0.7, jnp.diag(jnp.array([d_r**2, (3.0 * d_t) ** 2])))
+    b = aim_from_image(paper_rig, 100.0, 0.7, jnp.diag(jnp.stack([s_r**2, s_t**2])))
     np.testing.assert_array_equal(np.asarray(a.covariance.cov), np.asarray(b.covariance.cov))
     assert float(a.zoom.zoom) == float(b.zoom.zoom)
 

@@ -66,7 +66,7 @@ def test_floor_measurement_is_the_closed_form_on_the_paraboloid(paper_rig):
 
 
 def test_floor_measurement_against_monte_carlo(rig):
-    """Detections with the rig's default sigmas (1 px, 1 deg: the sigma rule's floor) drawn from
+    """Detections with the rig's default sigmas (1 px, 1 deg: those of an aim without a detection) drawn from
     N((r_f, theta_f), diag(sigma^2)) at 20 % to 70 % of the rim (n = 200 000 per point, seed 0) and
     mapped to the floor: their sample covariance is R (whitened: the identity within MC_BOUND)."""
     rng = np.random.default_rng(0)

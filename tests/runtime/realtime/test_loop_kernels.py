@@ -3,6 +3,8 @@ aim pipeline's sigma rule) and `update_background` (adaptation outside the peopl
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -34,12 +36,10 @@ def test_perceive_measures_the_detections_on_the_floor_with_the_sigma_rule(paper
     r_f, th = float(dets.r_f[k]), float(dets.theta_f[k])
     assert r_f == pytest.approx(float(paper_detector.polar.hyp_r_f[i]), abs=1e-6)
     d = paper_rig.detection
-    s_r = max(float(dets.sigma_r_f[k]), float(d.sigma_r_f))
-    s_t = max(float(dets.sigma_theta_f[k]), float(d.sigma_theta_f))
-    # both branches of the rule: this painted person's sigma_r_f (2.4 px) is above the rig's 1 px and
-    # is kept; one person's sigma_theta_f (the sector edges' quantisation, 0.2 deg) is raised to 1 deg
-    assert s_r == float(dets.sigma_r_f[k]) > float(d.sigma_r_f)
-    assert s_t == float(d.sigma_theta_f) > float(dets.sigma_theta_f[k])
+    # the rule: the detector's sigmas scaled by the rig's gains, widened by its extra terms
+    s_r = math.hypot(float(d.sigma_gain_r_f) * float(dets.sigma_r_f[k]), float(d.sigma_extra_r_f))
+    s_t = math.hypot(float(d.sigma_gain_theta_f) * float(dets.sigma_theta_f[k]), float(d.sigma_extra_theta_f))
+    assert s_t > float(dets.sigma_theta_f[k])
     z0, R0 = floor_measurement(paper_rig, r_f, th, s_r, s_t)
     np.testing.assert_allclose(np.asarray(z[k]), np.asarray(z0), rtol=1e-12)
     np.testing.assert_allclose(np.asarray(R[k]), np.asarray(R0), rtol=1e-12)

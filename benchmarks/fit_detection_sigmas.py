@@ -1,0 +1,162 @@
+"""Fit and check the sigma rule (:func:`omnijax.aiming.detection_sigmas`) on rendered scenarios.
+
+Each detection's sigma handed to the pointing covariance is
+
+    sigma_r_f^2     = (sigma_gain_r_f     * detector's sigma_r_f)^2     + sigma_extra_r_f^2
+    sigma_theta_f^2 = (sigma_gain_theta_f * detector's sigma_theta_f)^2 + sigma_extra_theta_f^2
+
+(``[detection]`` keys; the detector's sigmas carry the per-detection quality: its foot Monte Carlo
+for the contrast and radius, and the sector's width beyond one person's for merged sectors and
+partial occlusion). This script reads pairs of ``omnijax render`` and ``omnijax detect`` output
+folders, matches every visible person to the detection whose sector holds them (the convention of
+benchmarks/detection_accuracy.py: the true foot azimuth within half the sector's width + 0.05 rad;
+isolated = no other person within 0.35 rad), and
+
+- ``fit``: finds the four coefficients by maximum likelihood of a Gaussian in each error mixed with
+  a uniform outlier share (the detections of the training folders; the share is printed: errors
+  the detector's quality features do not flag), printing the TOML lines for the rig's ``[detection]``;
+- ``score``: the normalised estimation error squared of r_f and theta_f under the rig's rule
+  (mean and share above 6.63, the chi-square(1) 99 % point), overall and for isolated people,
+  per folder pair and pooled.
+
+Run (see docs/detection.md, "Honest sigmas"):
+
+    omnijax render --scenario three_people --frames 400 --seed 101 --out R
+    omnijax detect R/omni.avi --config configs/paper.toml --out D
+    .venv/bin/python benchmarks/fit_detection_sigmas.py fit --config configs/paper.toml R:D ...
+    .venv/bin/python benchmarks/fit_detection_sigmas.py score --config configs/paper.toml R2:D2 ...
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import jax
+
+jax.config.update("jax_enable_x64", True)  # as the omnijax command runs
+import numpy as np
+from scipy.optimize import minimize
+
+#: NEES of one Gaussian coordinate exceeds this with probability 0.01 (chi-square(1) 99 % point).
+NEES_99 = 6.63
+#: Matching: the true azimuth within half the sector's width plus this (rad); isolated: no other person this near (rad).
+SECTOR_MARGIN, ISOLATED = 0.05, 0.35
+
+
+def wrap_pi(a):
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+def matched(render_dir: Path, detect_dir: Path) -> dict[str, np.ndarray]:
+    """Per matched (person, detection): errors, the detector's own sigmas, and whether isolated.
+
+    A person counts where the world says the foot is visible and inside the image; each detection
+    matches at most one person (nearest centre first)."""
+    truth = {}
+    with (render_dir / "truth.jsonl").open() as f:
+        for line in f:
+            t = json.loads(line)
+            truth[t["frame"]] = t["persons"]
+    rows = []
+    with (detect_dir / "detections.jsonl").open() as f:
+        for line in f:
+            d = json.loads(line)
+            persons = truth.get(d["frame"], [])
+            th_all = np.array([p["theta_f"] for p in persons])
+            used = set()
+            for i, p in enumerate(persons):
+                if not (p["in_image"] and p["foot_visible"]):
+                    continue
+                best, bk = None, None
+                for k, q in enumerate(d["people"]):
+                    if k in used:
+                        continue
+                    dth = abs(float(wrap_pi(q["theta_f"] - p["theta_f"])))
+                    half = 0.5 * abs(float(wrap_pi(q["theta_r"] - q["theta_l"]))) + SECTOR_MARGIN
+                    if dth <= half and (best is None or dth < best):
+                        best, bk = dth, k
+                if bk is None:
+                    continue
+                used.add(bk)
+                q = d["people"][bk]
+                others = np.abs(wrap_pi(np.delete(th_all, i) - p["theta_f"]))
+                rows.append((q["r_f"] - p["r_f"], float(wrap_pi(q["theta_f"] - p["theta_f"])),
+                             q.get("detector_sigma_r_f", q["sigma_r_f"]),
+                             q.get("detector_sigma_theta_f", q["sigma_theta_f"]),
+                             float(others.min(initial=math.inf) > ISOLATED)))
+    a = np.array(rows, float).reshape(-1, 5)
+    return {"e_r": a[:, 0], "e_t": a[:, 1], "s_r": a[:, 2], "s_t": a[:, 3], "isolated": a[:, 4] > 0}
+
+
+def pooled(pairs: list[tuple[Path, Path]]) -> dict[str, np.ndarray]:
+    parts = [matched(r, d) for r, d in pairs]
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def fit_component(e: np.ndarray, s: np.ndarray) -> tuple[float, float, float]:
+    """(gain, extra, outlier share) maximising the likelihood of errors ``e`` under a Gaussian with
+    sigma^2 = (gain s)^2 + extra^2, mixed with a uniform outlier over the errors' range (what the
+    detector's quality features do not flag: a plain Gaussian fit lets those few inflate every
+    detection's sigma)."""
+    width = 2 * np.max(np.abs(e))
+    def nll(p):
+        var = np.exp(2 * p[0]) * s**2 + np.exp(2 * p[1])
+        eps = 1 / (1 + np.exp(-p[2]))
+        dens = (1 - eps) * np.exp(-0.5 * e**2 / var) / np.sqrt(2 * np.pi * var) + eps / width
+        return -np.sum(np.log(dens))
+    x0 = np.array([0.0, np.log(max(np.median(np.abs(e)), 1e-6)), -3.0])
+    res = minimize(nll, x0, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9, "maxiter": 8000})
+    return float(np.exp(res.x[0])), float(np.exp(res.x[1])), float(1 / (1 + np.exp(-res.x[2])))
+
+
+def nees_figures(e: np.ndarray, s: np.ndarray) -> dict:
+    n = (e / s) ** 2
+    return {"n": int(n.size), "mean": float(n.mean()) if n.size else None,
+            "median": float(np.median(n)) if n.size else None,
+            "p_over_6.63": float(np.mean(n > NEES_99)) if n.size else None}
+
+
+def score(rig, data: dict[str, np.ndarray]) -> dict:
+    from omnijax.aiming import detection_sigmas
+
+    s_r, s_t = (np.asarray(a) for a in detection_sigmas(rig, data["s_r"], data["s_t"]))
+    out = {}
+    for name, sel in (("all", np.ones_like(data["isolated"])), ("isolated", data["isolated"])):
+        out[name] = {"r_f": nees_figures(data["e_r"][sel], s_r[sel]),
+                     "theta_f": nees_figures(data["e_t"][sel], s_t[sel])}
+    return out
+
+
+def main() -> int:
+    from runtime.files import load_rig
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("mode", choices=("fit", "score"))
+    ap.add_argument("--config", required=True, help="rig TOML the detections were made with")
+    ap.add_argument("pairs", nargs="+", metavar="RENDER:DETECT", help="render and detect output folders")
+    args = ap.parse_args()
+    pairs = [tuple(Path(x) for x in p.split(":", 1)) for p in args.pairs]
+    rig = load_rig(args.config)
+    if args.mode == "fit":
+        data = pooled(pairs)
+        g_r, x_r, o_r = fit_component(data["e_r"], data["s_r"])
+        g_t, x_t, o_t = fit_component(data["e_t"], data["s_t"])
+        print(json.dumps({"detections": int(data["e_r"].size), "isolated": int(data["isolated"].sum()),
+                          "outlier_share_r_f": o_r, "outlier_share_theta_f": o_t}))
+        print(f"sigma_gain_r_f = {g_r:.4g}\nsigma_extra_r_f = {x_r:.4g}\n"
+              f"sigma_gain_theta_f = {g_t:.4g}\nsigma_extra_theta_f_deg = {math.degrees(x_t):.4g}")
+        return 0
+    per = {f"{r.name}": score(rig, matched(r, d)) for r, d in pairs}
+    per["pooled"] = score(rig, pooled(pairs))
+    print(json.dumps(per, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
