@@ -57,13 +57,23 @@ def kalman_costs(xp, Pp, live, z, R, valid):
 
 
 def optimal_assignment(cost):
-    """The assignment of rows to columns of least total cost (the Hungarian method with potentials,
-    shortest augmenting paths: O(n^3)); ``cost`` is padded to a square with :data:`FORBIDDEN`.
-    Returns each row's column (N,), -1 where the best joint assignment leaves it without one
-    (its pair is forbidden). Jittable: fixed shapes, loops as ``lax`` loops."""
+    """The assignment of rows to columns of least total cost (SciPy's ``linear_sum_assignment``
+    semantics: min(N, K) pairs) by the Hungarian method with potentials and shortest augmenting
+    paths, over the shorter side (O(min^2 max)). Returns each row's column (N,), -1 where it has
+    none or only a :data:`FORBIDDEN` one. Jittable: fixed shapes, ``lax`` loops."""
     N, K = cost.shape
-    n = max(N, K)
-    a = jnp.full((n + 1, n + 1), FORBIDDEN, cost.dtype).at[1:N + 1, 1:K + 1].set(cost).at[0].set(0.0)
+    if N <= K:
+        col = _rows_to_columns(cost)
+    else:
+        col = jnp.full(N, -1, jnp.int32).at[_rows_to_columns(cost.T)].set(jnp.arange(K, dtype=jnp.int32))
+    ok = (col >= 0) & (cost[jnp.arange(N), jnp.clip(col, 0, K - 1)] < FORBIDDEN)
+    return jnp.where(ok, col, -1)
+
+
+def _rows_to_columns(cost):
+    """Each row's column (n,) in the least-cost assignment of all n rows to m >= n columns."""
+    n, m = cost.shape
+    a = jnp.zeros((n + 1, m + 1), cost.dtype).at[1:, 1:].set(cost)
     inf = jnp.asarray(jnp.inf, cost.dtype)
 
     def add_row(i, state):
@@ -86,7 +96,7 @@ def optimal_assignment(cost):
             minv = jnp.where(used, minv, minv - delta)
             return u, v, p, way, minv, used, j1
 
-        c = grow((u, v, p, way, jnp.full(n + 1, inf, cost.dtype), jnp.zeros(n + 1, bool), jnp.int32(0)))
+        c = grow((u, v, p, way, jnp.full(m + 1, inf, cost.dtype), jnp.zeros(m + 1, bool), jnp.int32(0)))
         u, v, p, way, _, _, j0 = lax.while_loop(lambda c: c[2][c[6]] != 0, grow, c)
 
         def augment(c):
@@ -97,12 +107,11 @@ def optimal_assignment(cost):
         p, _ = lax.while_loop(lambda c: c[1] != 0, augment, (p, j0))
         return u, v, p, way
 
-    zeros = jnp.zeros(n + 1, cost.dtype)
-    ints = jnp.zeros(n + 1, jnp.int32)
-    _, _, p, _ = lax.fori_loop(1, n + 1, add_row, (zeros, zeros, ints, ints))
-    col_of_row = jnp.zeros(n + 1, jnp.int32).at[p].set(jnp.arange(n + 1, dtype=jnp.int32))[1:N + 1] - 1
-    ok = (col_of_row < K) & (cost[jnp.arange(N), jnp.clip(col_of_row, 0, K - 1)] < FORBIDDEN)
-    return jnp.where(ok, col_of_row, -1)
+    ints = jnp.zeros(m + 1, jnp.int32)
+    state = (jnp.zeros(n + 1, cost.dtype), jnp.zeros(m + 1, cost.dtype), ints, ints)
+    _, _, p, _ = lax.fori_loop(1, n + 1, add_row, state)
+    # p[j]: the row (1-based) holding column j; columns nobody holds point at row 0 (dropped)
+    return jnp.zeros(n + 1, jnp.int32).at[p].set(jnp.arange(m + 1, dtype=jnp.int32))[1:] - 1
 
 
 def greedy_assignment(dist, gate):
