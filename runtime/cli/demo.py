@@ -177,7 +177,8 @@ def run(args: argparse.Namespace) -> int:
                 rig, source, Path(args.out), driver=driver, profile=profile, config=config,
                 paced=args.pace == "live", background_frames=30, background_step=args.background_step,
                 video=not args.no_video, record=args.record, title=f"OMNI 1  {sc.name}",
-                foveal=FovealInset(world, emulator, args.inset_every), hooks=(scorer, unplug), finish=finish,
+                foveal=FovealInset(world, emulator, args.inset_every), hooks=(scorer,), control_hooks=(unplug,),
+                finish=finish,
                 screenshot_at=args.screenshot)
         finally:
             driver.disconnect()

@@ -2,7 +2,8 @@
 foveal inset and its video encoding, the demo's scoring, recording), and the log.
 
 The control thread hands each processed frame (and each fault record) to :class:`OffPath` through
-a bounded queue and never waits for it: when the queue is full the item is skipped and counted,
+a bounded queue and never waits for it (except with ``--pace all``, where no frame is late and
+every one is drawn): when the queue is full the item is skipped and counted,
 and the summary lists which frames the video and the log lack (``off_path`` in ``summary.json``,
 docs/runtime.md). What the hooks see is a snapshot taken on the control thread (the tracks
 confirmed at that frame, the counters then), so that drawing never reads state the control
@@ -36,8 +37,8 @@ class OffPath:
     """
 
     def __init__(self, log_path: Path, hooks: Callable | None, describe: Callable, record_time: Callable,
-                 size: int = QUEUE_SIZE):
-        self.hooks, self.describe, self.record_time = hooks, describe, record_time
+                 size: int = QUEUE_SIZE, block: bool = False):
+        self.hooks, self.describe, self.record_time, self.block = hooks, describe, record_time, block
         self.queue: queue.Queue = queue.Queue(maxsize=size)
         self.size = size
         self.done = self.skipped = self.max_waiting = 0
@@ -49,9 +50,18 @@ class OffPath:
 
     def submit(self, item: dict) -> bool:
         """Queue ``item`` (``record``, and for a processed frame ``frame``, ``dets``, ``z``, ``tracks``,
-        ``command``, ``status``) without waiting; ``False`` (and counted) when the queue is full."""
+        ``command``, ``status``) without waiting; ``False`` (and counted) when the queue is full.
+        With ``block`` (frames not paced: ``--pace all``, nothing is late) it waits for room instead."""
         try:
-            self.queue.put_nowait(item)
+            if self.block:
+                while self.error is None:
+                    try:
+                        self.queue.put(item, timeout=0.5)
+                        break
+                    except queue.Full:
+                        continue
+            else:
+                self.queue.put_nowait(item)
         except queue.Full:
             self.skipped += 1
             if len(self.skipped_frames) < LISTED:
@@ -76,7 +86,8 @@ class OffPath:
         # below the control thread in the scheduler's eyes (Linux: a thread's own nice value), so that
         # on a busy machine the cores go to the control path first
         try:
-            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)
+            tid = threading.get_native_id()
+            os.setpriority(os.PRIO_PROCESS, tid, min(os.getpriority(os.PRIO_PROCESS, tid) + NICE, 19))
         except (AttributeError, OSError):
             pass
         while True:

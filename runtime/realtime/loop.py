@@ -51,6 +51,7 @@ from runtime.realtime.tracker import Tracker
 
 #: Timed stages: the control thread's, then the drawing thread's (``draw``: the hooks; ``log``).
 STAGES = ("capture", "control", "track", "aim", "send", "adapt", "draw", "log")
+_slew_s = jax.jit(pan_tilt_slew_s)
 __all__ = ["STAGES", "Command", "RealTimeLoop", "Samples", "Timings", "perceive", "update_background"]
 
 
@@ -128,11 +129,14 @@ class RealTimeLoop:
     floor positions (K, 2) m (the demo scores there and the annotated view is drawn there),
     ``tracks`` the tracks confirmed at that frame (copies), ``status`` the loop's counters then
     (:meth:`status`); it returns extra log fields.
+    ``on_control(record, frame)``: called on the control thread after the send (fault injection
+    that must happen at its frame), returning extra log fields; keep it cheap.
     ``driver`` may be ``None`` (no PTZ: commands are computed and logged only).
     """
 
     def __init__(self, rig: Rig, detector: Detector, background, capture: Capture, driver, profile,
-                 config: LoopConfig, log_path: Path, on_frame: Callable | None = None):
+                 config: LoopConfig, log_path: Path, on_frame: Callable | None = None,
+                 on_control: Callable | None = None):
         self.rig, self.detector, self.capture = rig, detector, capture
         self.driver, self.profile, self.cfg = driver, profile, config
         self.bg = background
@@ -144,7 +148,7 @@ class RealTimeLoop:
         self.n_slots = 4 * detector.max_people
         self.selector = TargetSelector(config.target, config.dwell_s)
         self.timings = Timings()
-        self.on_frame = on_frame
+        self.on_frame, self.on_control = on_frame, on_control
         self.log_path = log_path
         self.counts = {"frames": 0, "broken": 0, "wrong_size": 0, "commands_sent": 0, "dead_zone": 0,
                        "no_target": 0, "invalid_geometry": 0, "deadline_overruns": 0, "tracks_over_slots": 0}
@@ -202,6 +206,7 @@ class RealTimeLoop:
         dets = jax.block_until_ready(self._control(blank, 0.0)).dets
         jax.block_until_ready(update_background(self.detector, self.bg, blank, self._theta_map, dets,
                                                 self.rig.detection.adapt_rate * self.cfg.adapt_every))
+        _slew_s(0.0, 0.0, 0.0, 0.0, *self._rates).block_until_ready()
         return dets
 
     # -- the loop -------------------------------------------------------------------------
@@ -209,7 +214,8 @@ class RealTimeLoop:
     def run(self) -> None:
         self.t_start = t_start = time.monotonic()
         last_status = t_start
-        self.off_path = OffPath(self.log_path, self.on_frame, self._describe, self._record)
+        self.off_path = OffPath(self.log_path, self.on_frame, self._describe, self._record,
+                                block=not getattr(self.capture, "paced", True))
         try:
             while not self._stop.is_set():
                 if self.cfg.max_frames is not None and self.counts["frames"] >= self.cfg.max_frames:
@@ -289,6 +295,8 @@ class RealTimeLoop:
             else:
                 self._pending[self.driver.sequence] = frame.t
         self._collect_writes()
+        if self.on_control is not None:
+            record.update(self.on_control(record, frame) or {})
         t = t_sent
         if self.counts["frames"] % self.cfg.adapt_every == 0:  # dispatched, not waited for
             self.bg, self.lines = update_background(self.detector, self.bg, x, self._theta_map, out.dets,
@@ -321,7 +329,7 @@ class RealTimeLoop:
         """Seconds the PTZ needs from the last command to ``target`` (device slew rates and zoom speed)."""
         if self.profile is None or self.sent is None:
             return 0.0
-        pan_tilt = float(pan_tilt_slew_s(target[0], target[1], self.sent[0], self.sent[1], *self._rates))
+        pan_tilt = float(_slew_s(target[0], target[1], self.sent[0], self.sent[1], *self._rates))
         zp = self.profile.zoom
         z_span = max(zp.position) - min(zp.position)
         d_zoom = abs(self.profile.zoom_position(target[2]) - self.profile.zoom_position(self.sent[2])) / z_span

@@ -166,11 +166,12 @@ def chain_hooks(*hooks) -> Callable:
 def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=None, config: LoopConfig,
                 paced: bool = True, background_frames: int | None = None, background_step: int = 1,
                 video: bool = True, record: bool = False,
-                title: str = "omnijax", foveal: Callable | None = None, hooks: tuple = (),
+                title: str = "omnijax", foveal: Callable | None = None, hooks: tuple = (), control_hooks: tuple = (),
                 finish: Callable | None = None, extra: dict | None = None, screenshot_at: int | None = None) -> dict:
     """Run the loop on ``source`` and write the outputs to ``out`` (see the module docstring).
 
-    ``hooks`` are extra ``on_frame`` hooks (the demo's scorer, fault injection); ``record`` writes
+    ``hooks`` are extra ``on_frame`` hooks (the demo's scorer), run on the drawing thread;
+    ``control_hooks`` run on the control thread at their frame (fault injection); ``record`` writes
     the processed omni frames as they came (``omni.avi``, to replay with ``omnijax run``); ``finish(summary)``
     may add to the summary before it is written; ``screenshot_at`` saves that processed frame's
     view as ``view.png``. Returns the summary.
@@ -184,7 +185,7 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
             loop, annot, writer, recorder, first = _start(
                 rig, source, stage, driver=driver, profile=profile, config=config, paced=paced, n_bg=n_bg,
                 background_step=background_step, video=video, record=record, title=title, foveal=foveal,
-                hooks=hooks, screenshot_at=screenshot_at)
+                hooks=hooks, control_hooks=control_hooks, screenshot_at=screenshot_at)
         setup_s = time.monotonic() - t0
         loop.install_signal_handlers()
         try:
@@ -212,7 +213,7 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
 
 def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: LoopConfig, paced: bool, n_bg: int,
            background_step: int, video: bool, record: bool, title: str, foveal, hooks: tuple,
-           screenshot_at: int | None):
+           control_hooks: tuple, screenshot_at: int | None):
     """Start-up of :func:`run_session`: the background, the detector, the writers, the loop, compiled."""
     W, H = rig.omni.image_size
     frames = source.frames()
@@ -225,7 +226,8 @@ def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: Lo
     annot = Annotator(rig, title, foveal, [writer.write] if writer else [])
     capture = Capture(source, paced=paced, frames=frames, first_index=first, shape=(H, W, 3))
     loop = RealTimeLoop(rig, detector, bg, capture, driver, profile, config, stage / "log.jsonl",
-                        on_frame=chain_hooks(*hooks, annot if (video or screenshot_at is not None) else None))
+                        on_frame=chain_hooks(*hooks, annot if (video or screenshot_at is not None) else None),
+                        on_control=chain_hooks(*control_hooks) if control_hooks else None)
     annot.loop = loop
 
     def shoot(record, frame, dets, z, tracks, command, status):
