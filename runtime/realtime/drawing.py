@@ -13,7 +13,6 @@ thread is changing.
 from __future__ import annotations
 
 import json
-import os
 import queue
 import threading
 import time
@@ -22,8 +21,6 @@ from pathlib import Path
 
 #: Frames (and fault records) waiting for the drawing thread at most: 2 s at 25 fps.
 QUEUE_SIZE = 50
-#: The drawing thread's nice value (Linux), relative to the process's.
-NICE = 10
 #: Skipped frames listed by index in the summary at most (all are counted).
 LISTED = 1000
 
@@ -83,13 +80,6 @@ class OffPath:
                 "skipped_frames": self.skipped_frames, "max_waiting": self.max_waiting}
 
     def _run(self) -> None:
-        # below the control thread in the scheduler's eyes (Linux: a thread's own nice value), so that
-        # on a busy machine the cores go to the control path first
-        try:
-            tid = threading.get_native_id()
-            os.setpriority(os.PRIO_PROCESS, tid, min(os.getpriority(os.PRIO_PROCESS, tid) + NICE, 19))
-        except (AttributeError, OSError):
-            pass
         while True:
             item = self.queue.get()
             if item is None:
