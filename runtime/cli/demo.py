@@ -26,7 +26,9 @@ frame), DIR/annotated.mp4 (the operator's view: the omni frame with sectors,
 centre lines, feet, heads, tracks with 95 % ellipses, and the foveal view
 rendered from the synthetic world at the emulated PTZ's actual position) and
 DIR/view.png (one frame of it, --screenshot; not written if the run ends before
-that frame).
+that frame or the drawing thread had to skip it). Drawing, the video and the log
+run on their own thread: frames it had no time for are skipped, counted and
+listed in summary.json (off_path), never waited for.
 
 Ctrl-C or SIGTERM during start-up (building the world, learning the background,
 compiling: 20-30 s) stops it at once: nothing is written, the emulator is stopped,
