@@ -38,6 +38,7 @@ test-slow: $(STAMP)
 bench: $(STAMP)
 	taskset -c 0 $(BIN)/python benchmarks/bench_uncertainty.py
 	taskset -c 0 $(BIN)/python benchmarks/bench_zoom.py
+	taskset -c 0 $(BIN)/python benchmarks/bench_control.py
 	$(BIN)/python benchmarks/bench_ptz.py
 	taskset -c 0 $(BIN)/python benchmarks/bench_render.py
 

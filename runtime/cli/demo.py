@@ -27,7 +27,9 @@ frame), DIR/annotated.mp4 (the operator's view: the omni frame with sectors,
 centre lines, feet, heads, tracks with 95 % ellipses, and the foveal view
 rendered from the synthetic world at the emulated PTZ's actual position) and
 DIR/view.png (one frame of it, --screenshot; not written if the run ends before
-that frame).
+that frame or the drawing thread had to skip it). Drawing, the video and the log
+run on their own thread: frames it had no time for are skipped, counted and
+listed in summary.json (off_path), never waited for.
 
 Ctrl-C or SIGTERM during start-up (building the world, learning the background,
 compiling: 20-30 s) stops it at once: nothing is written, the emulator is stopped,
@@ -180,7 +182,8 @@ def run(args: argparse.Namespace) -> int:
                 rig, source, Path(args.out), driver=driver, profile=profile, config=config,
                 paced=args.pace == "live", background_frames=30, background_step=args.background_step,
                 video=not args.no_video, record=args.record, title=f"OMNI 1  {sc.name}",
-                foveal=FovealInset(world, emulator, args.inset_every), hooks=(scorer, unplug), finish=finish,
+                foveal=FovealInset(world, emulator, args.inset_every), hooks=(scorer,), control_hooks=(unplug,),
+                finish=finish,
                 screenshot_at=args.screenshot)
         finally:
             driver.disconnect()

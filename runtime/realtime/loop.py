@@ -1,16 +1,23 @@
 """The real-time loop: frame -> detection -> tracks -> target -> predicted head -> pan/tilt/zoom -> PTZ.
 
-Per frame (each stage timed):
+The control thread does only this, per frame (each stage timed):
 
 1. ``capture``: the newest frame from the :class:`~runtime.sources.Capture` (stale frames are
    rejected there, broken and wrong-size frames are counted here and skipped);
-2. ``detect``: the jitted detector and the detections' floor positions (one compiled call);
-3. ``track``: the Kalman (or nearest-neighbour) tracker;
-4. ``aim``: the target chosen, its head predicted to when the PTZ will get there (tracking and
-   latency uncertainty included), pan/tilt, their covariance and the zoom of both rules (jitted);
+2. ``control``: one compiled call (:func:`runtime.realtime.control.control_step`): the detector,
+   the detections' floor positions, the tracker's arithmetic, and the aim pipeline at every
+   confirmed track's head predicted to when the PTZ will get there (tracking and latency
+   uncertainty included): pan/tilt, their covariance and the zoom of both rules;
+3. ``track``: the tracker's bookkeeping (ids, hits, misses);
+4. ``aim``: the target chosen (:class:`~runtime.realtime.targeting.TargetSelector`) and its aim
+   taken from the call's result, the dead-zone test;
 5. ``send``: the PTZ command through the driver, unless it falls in the dead-zone;
-6. afterwards, off the latency path: the hooks (``draw``: the annotated frame, the demo's
-   scoring), the log line, the background update.
+6. ``adapt``: the background update dispatched (it runs while the loop waits for the next frame).
+
+Everything else runs on another thread fed by a bounded queue that never holds up this one
+(:class:`~runtime.realtime.drawing.OffPath`): the hooks (``draw``: the annotated frame with the
+foveal inset and its encoding, the demo's scoring) and the log line; what it had to skip is
+counted (``off_path`` in the summary).
 
 The loop keeps going through faults (the source ends, a broken frame, a frame of the wrong
 size, the PTZ port vanishing and returning) and counts each; on Ctrl-C or SIGTERM it sends
@@ -19,7 +26,7 @@ the PTZ home, writes the summary and closes the outputs.
 
 from __future__ import annotations
 
-import json
+import copy
 import math
 import signal
 import sys
@@ -33,35 +40,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from omnijax import (
-    INPUT_NAMES,
-    Aim,
-    Detector,
-    Rig,
-    adapt_background,
-    aim_at_floor,
-    detect,
-    floor_from_detections,
-    line_background,
-    sector_mask,
-)
-from omnijax.geometry import wrap_pi
+from omnijax import INPUT_NAMES, Aim, Detector, Rig, adapt_background, line_background, sector_mask
 from omnijax.zoom import ZOOM_RULES
 from runtime.realtime.config import LoopConfig
+from runtime.realtime.control import Slew, control_step, pan_tilt_slew_s, perceive
+from runtime.realtime.drawing import OffPath
 from runtime.realtime.sources import Capture, Frame
 from runtime.realtime.targeting import TargetSelector, outside_dead_zone
 from runtime.realtime.tracker import Tracker
 
-STAGES = ("capture", "detect", "track", "aim", "send", "log", "draw", "adapt")
-
-
-@jax.jit
-def perceive(detector: Detector, rig: Rig, frame, bg, lines):
-    """Detection (steps 1-6) and the detections' floor positions with covariances (the aim
-    pipeline's :func:`~omnijax.aiming.floor_from_detections`, under its sigma rule)."""
-    dets, trace = detect(detector, frame, bg, lines)
-    z, R = floor_from_detections(rig, dets.r_f, dets.theta_f, dets.sigma_r_f, dets.sigma_theta_f)
-    return dets, trace, z, R
+#: Timed stages: the control thread's, then the drawing thread's (``draw``: the hooks; ``log``).
+STAGES = ("capture", "control", "track", "aim", "send", "adapt", "draw", "log")
+_slew_s = jax.jit(pan_tilt_slew_s)
+__all__ = ["STAGES", "Command", "RealTimeLoop", "Samples", "Timings", "perceive", "update_background"]
 
 
 @jax.jit
@@ -133,25 +124,34 @@ class Timings:
 class RealTimeLoop:
     """Runs detection, tracking and PTZ control over a :class:`Capture` (see the module docstring).
 
-    Hooks: ``on_frame(record, frame, dets, z, tracks, command)`` after each processed frame, with
-    ``z`` the valid detections' floor positions (K, 2) m (the demo scores there and the annotated
-    view is drawn there), returning extra log fields;
+    Hooks: ``on_frame(record, frame, dets, z, tracks, command, status)`` for each processed frame,
+    called on the drawing thread, with ``dets`` the detections (NumPy), ``z`` the valid detections'
+    floor positions (K, 2) m (the demo scores there and the annotated view is drawn there),
+    ``tracks`` the tracks confirmed at that frame (copies), ``status`` the loop's counters then
+    (:meth:`status`); it returns extra log fields.
+    ``on_control(record, frame)``: called on the control thread after the send (fault injection
+    that must happen at its frame), returning extra log fields; keep it cheap.
     ``driver`` may be ``None`` (no PTZ: commands are computed and logged only).
     """
 
     def __init__(self, rig: Rig, detector: Detector, background, capture: Capture, driver, profile,
-                 config: LoopConfig, log_path: Path, on_frame: Callable | None = None):
+                 config: LoopConfig, log_path: Path, on_frame: Callable | None = None,
+                 on_control: Callable | None = None):
         self.rig, self.detector, self.capture = rig, detector, capture
         self.driver, self.profile, self.cfg = driver, profile, config
         self.bg = background
         self.lines = line_background(detector, background)
         self.tracker = Tracker(config.tracker)
+        if self.tracker.confirm < 2:
+            raise ValueError("the fused control step aims at tracks matched again this frame: confirm must be >= 2")
+        #: tracker slots in the compiled step; beyond them the tracks missing longest are dropped (counted)
+        self.n_slots = 4 * detector.max_people
         self.selector = TargetSelector(config.target, config.dwell_s)
         self.timings = Timings()
-        self.on_frame = on_frame
+        self.on_frame, self.on_control = on_frame, on_control
         self.log_path = log_path
         self.counts = {"frames": 0, "broken": 0, "wrong_size": 0, "commands_sent": 0, "dead_zone": 0,
-                       "no_target": 0, "invalid_geometry": 0, "deadline_overruns": 0}
+                       "no_target": 0, "invalid_geometry": 0, "deadline_overruns": 0, "tracks_over_slots": 0}
         self.sent: tuple[float, float, float] | None = None
         self.sent_at: float | None = None
         self._arrive_at = 0.0
@@ -161,10 +161,15 @@ class RealTimeLoop:
         self.t_start = time.monotonic()
         self._pending: dict[int, float] = {}  # driver sequence number -> frame available time
         self.stop_reason = "source ended"
+        self.off_path: OffPath | None = None
         W, H = rig.omni.image_size
         self.shape = (H, W, 3)
         self._theta_map = jnp.asarray(rig.omni.to_polar(*np.meshgrid(np.arange(W), np.arange(H)))[1], jnp.float32)
         self.period = 1.0 / capture.source.fps if capture.source.fps else None
+        if profile is not None:
+            self._rates = (float(profile.pan.slew_deg_s()), float(profile.tilt.slew_deg_s()))
+        else:
+            self._rates = (1.0, 1.0)
 
     # -- control --------------------------------------------------------------------------
 
@@ -183,14 +188,26 @@ class RealTimeLoop:
             signal.signal(sig, handler)
         self._old_handlers.clear()
 
+    def _control(self, image, t: float):
+        """The compiled per-frame call on ``image`` at time ``t`` with the tracker's current slots."""
+        slew = Slew(known=jnp.asarray(self.sent is not None and self.profile is not None),
+                    pan=jnp.asarray(self.sent[0] if self.sent else 0.0),
+                    tilt=jnp.asarray(self.sent[1] if self.sent else 0.0),
+                    pan_deg_s=jnp.asarray(self._rates[0]), tilt_deg_s=jnp.asarray(self._rates[1]),
+                    latency_s=jnp.asarray(self.profile.link.command_latency_s if self.profile is not None else 0.0))
+        tr = self.tracker
+        return control_step(self.detector, self.rig, image, self.bg, self.lines, tr.slots(self.n_slots),
+                            jnp.asarray(t, float), tr.accel_sd, tr.nearest_gate_m, slew, mode=tr.mode,
+                            confirm=tr.confirm)
+
     def warm_up(self):
         """Compile the jitted stages on a frame of the right size before timing anything; returns
         the (empty) detections of the blank frame."""
         blank = jnp.zeros(self.shape, jnp.uint8)
-        dets = perceive(self.detector, self.rig, blank, self.bg, self.lines)[0]
+        dets = jax.block_until_ready(self._control(blank, 0.0)).dets
         jax.block_until_ready(update_background(self.detector, self.bg, blank, self._theta_map, dets,
                                                 self.rig.detection.adapt_rate * self.cfg.adapt_every))
-        jax.block_until_ready(aim_at_floor(self.rig, jnp.array([1.0, 0.5]), 0.01 * jnp.eye(2), ZOOM_RULES))
+        _slew_s(0.0, 0.0, 0.0, 0.0, *self._rates).block_until_ready()
         return dets
 
     # -- the loop -------------------------------------------------------------------------
@@ -198,7 +215,9 @@ class RealTimeLoop:
     def run(self) -> None:
         self.t_start = t_start = time.monotonic()
         last_status = t_start
-        with self.log_path.open("w") as log:
+        self.off_path = OffPath(self.log_path, self.on_frame, self._describe, self._record,
+                                block=not getattr(self.capture, "paced", True))
+        try:
             while not self._stop.is_set():
                 if self.cfg.max_frames is not None and self.counts["frames"] >= self.cfg.max_frames:
                     self.stop_reason = "frame limit"
@@ -214,12 +233,17 @@ class RealTimeLoop:
                         break
                     continue
                 self._record("capture", t0)
-                self._process(frame, log)
+                self._process(frame)
+                if self.off_path.error is not None:
+                    self.stop_reason = "the drawing thread failed"
+                    break
                 now = time.monotonic()
                 if not self.cfg.quiet and now - last_status >= self.cfg.status_every_s:
                     self._status(now - t_start)
                     last_status = now
-        self.elapsed = time.monotonic() - t_start
+        finally:
+            self.elapsed = time.monotonic() - t_start
+            self.off_path.close()
         if not self.cfg.quiet:
             sys.stderr.write("\n")
 
@@ -228,29 +252,38 @@ class RealTimeLoop:
         self.timings.stages[stage].append(1e3 * (t1 - t0))
         return t1
 
-    def _process(self, frame: Frame, log) -> None:
+    def _process(self, frame: Frame) -> None:
         record: dict = {"frame": frame.index, "t": round(frame.t, 6)}
         if frame.image is None:
             self.counts["broken"] += 1
-            log.write(json.dumps({**record, "fault": "broken frame"}) + "\n")
+            self.off_path.submit({"record": {**record, "fault": "broken frame"}})
             return
         if frame.image.shape != self.shape:
             self.counts["wrong_size"] += 1
             h, w = frame.image.shape[:2]
             fault = f"frame {w}x{h}, expected {self.shape[1]}x{self.shape[0]}"
-            log.write(json.dumps({**record, "fault": fault}) + "\n")
+            self.off_path.submit({"record": {**record, "fault": fault}})
             return
         self.counts["frames"] += 1
         t = time.monotonic()
+        tracker = self.tracker
+        if len(tracker.tracks) > self.n_slots:  # many false alarms: keep the tracks seen most recently
+            self.counts["tracks_over_slots"] += len(tracker.tracks) - self.n_slots
+            tracker.tracks = sorted(tracker.tracks, key=lambda tr: tr.misses)[: self.n_slots]
+        slots = list(tracker.tracks)
         x = jnp.asarray(frame.image)
-        dets, _, z, R = perceive(self.detector, self.rig, x, self.bg, self.lines)
-        valid = np.asarray(dets.valid)
-        z, R = np.asarray(z)[valid], np.asarray(R)[valid]
-        t = self._record("detect", t)
-        tracks = self.tracker.step(frame.stamp, z, R)
-        confirmed = self.tracker.confirmed()
+        out = self._control(x, frame.stamp)
+        c = jax.device_get(out)
+        t = self._record("control", t)
+        valid = np.asarray(c.dets.valid)
+        compact = np.cumsum(valid) - 1  # index among the valid detections
+        assign = np.where(c.assign >= 0, compact[np.clip(c.assign, 0, None)], -1)[: len(slots)]
+        z, R = c.z[valid], c.R[valid]
+        tracker.apply(frame.stamp, z, R, assign, c.x, c.P)
+        confirmed = tracker.confirmed()
         t = self._record("track", t)
-        command = self._aim(frame, confirmed)
+        aim_of = {slots[int(i)].id: j for j, (i, ok) in enumerate(zip(c.aim_slot, c.aim_ok)) if ok}
+        command = self._aim(frame, confirmed, c, aim_of)
         t = self._record("aim", t)
         if command is not None and command.sent:
             self._send(command)
@@ -263,22 +296,29 @@ class RealTimeLoop:
             else:
                 self._pending[self.driver.sequence] = frame.t
         self._collect_writes()
+        if self.on_control is not None:
+            record.update(self.on_control(record, frame) or {})
         t = t_sent
-        if self.on_frame is not None:
-            record.update(self.on_frame(record, frame, dets, z, tracks, command) or {})
-        t = self._record("draw", t)
-        record.update(self._describe(dets, valid, confirmed, command))
-        log.write(json.dumps(record) + "\n")
-        t = self._record("log", t)
-        if self.counts["frames"] % self.cfg.adapt_every == 0:
-            self.bg, self.lines = update_background(self.detector, self.bg, x, self._theta_map, dets,
+        if self.counts["frames"] % self.cfg.adapt_every == 0:  # dispatched, not waited for
+            self.bg, self.lines = update_background(self.detector, self.bg, x, self._theta_map, out.dets,
                                                     self.rig.detection.adapt_rate * self.cfg.adapt_every)
-            jax.block_until_ready(self.lines)
         self._record("adapt", t)
+        self.off_path.submit({"record": record, "frame": frame, "dets": c.dets, "z": z,
+                              "tracks": [copy.copy(tr) for tr in confirmed], "command": command,
+                              "status": self.status()})
         elapsed = time.monotonic() - frame.t
         self.timings.frame.append(1e3 * elapsed)
         if self.period and elapsed > self.period:
             self.counts["deadline_overruns"] += 1
+
+    def status(self) -> dict:
+        """A snapshot of the loop's counters for the drawing thread (taken on the control thread)."""
+        st = {"frames": self.counts["frames"], "elapsed": time.monotonic() - self.t_start,
+              "counts": dict(self.counts), "capture": dict(self.capture.counts), "captures": self.selector.captures,
+              "driver": None}
+        if self.driver is not None:
+            st["driver"] = {"connected": self.driver.connected, **self.driver.counters}
+        return st
 
     def _settled(self) -> bool:
         """Whether the PTZ should have reached the last command by now (slew-time estimate)."""
@@ -286,53 +326,43 @@ class RealTimeLoop:
             return False
         return time.monotonic() >= self._arrive_at
 
-    def _slew_time(self, target: tuple[float, float, float], zoom: bool = True) -> float:
+    def _slew_time(self, target: tuple[float, float, float]) -> float:
         """Seconds the PTZ needs from the last command to ``target``: the device profile's command latency,
-        then its slew rates (and the zoom speed unless ``zoom`` is false)."""
+        then its slew rates and zoom speed."""
         if self.profile is None or self.sent is None:
             return 0.0
-        d_pan = abs(math.degrees(wrap_pi(target[0] - self.sent[0])))
-        d_tilt = abs(math.degrees(target[1] - self.sent[1]))
+        pan_tilt = float(_slew_s(target[0], target[1], self.sent[0], self.sent[1], *self._rates))
         zp = self.profile.zoom
         z_span = max(zp.position) - min(zp.position)
         d_zoom = abs(self.profile.zoom_position(target[2]) - self.profile.zoom_position(self.sent[2])) / z_span
-        return self.profile.link.command_latency_s + max(
-            d_pan / self.profile.pan.slew_deg_s(), d_tilt / self.profile.tilt.slew_deg_s(),
-            d_zoom * zp.seconds_full_range if zoom else 0.0)
+        return self.profile.link.command_latency_s + max(pan_tilt, d_zoom * zp.seconds_full_range)
 
-    def _aim(self, frame: Frame, tracks) -> Command | None:
+    def _aim(self, frame: Frame, tracks, c, aim_of: dict[int, int]) -> Command | None:
         target = self.selector.choose(frame.stamp, tracks, self._settled())
         if target is None:
             self.counts["no_target"] += 1
             return None
-        # the head is predicted to when the PTZ's pan and tilt get there (their slew time from the last
-        # command), refined once; the zoom keeps adjusting meanwhile and does not lengthen the horizon,
-        # which would widen the uncertainty, hence the zoom, hence the horizon
-        lead = 0.0
-        for _ in range(2):
-            t_predicted = frame.stamp + lead
-            xp, Pp = target.predict(t_predicted, self.tracker.accel_sd)
-            aimed = aim_at_floor(self.rig, jnp.asarray(xp[:2]), jnp.asarray(Pp[:2, :2]), ZOOM_RULES)
-            lead = self._slew_time((float(aimed.pointing.pan), float(aimed.pointing.tilt), 1.0), zoom=False)
+        j = aim_of[target.id]  # every confirmed track was aimed at in the control step
+        aimed: Aim = jax.tree.map(lambda a: a[j], c.aims)
         if not bool(aimed.pointing.valid):
             self.counts["invalid_geometry"] += 1
             return None
         zooms = {rule: float(aimed.zooms[rule].zoom) for rule in ZOOM_RULES}
         pan, tilt, zoom = float(aimed.pointing.pan), float(aimed.pointing.tilt), zooms[self.cfg.zoom_rule]
-        cov = np.asarray(aimed.covariance.cov)
+        cov = aimed.covariance.cov
         sd_pan, sd_tilt = math.sqrt(cov[0, 0]), math.sqrt(cov[1, 1])
         new_target = self.selector.current != self._sent_track
         send = new_target or outside_dead_zone((pan, tilt, zoom), self.sent, sd_pan, sd_tilt, self.cfg.dead_zone_sd)
         if not send:
             self.counts["dead_zone"] += 1
         return Command(track=target.id, pan=pan, tilt=tilt, zoom=zoom, zooms=zooms, sd_pan=sd_pan,
-                       sd_tilt=sd_tilt, sent=send, t_predicted=t_predicted, aimed=aimed,
-                       floor_sd=np.sqrt(np.diag(Pp)[:2]))
+                       sd_tilt=sd_tilt, sent=send, t_predicted=frame.stamp + float(c.lead[j]), aimed=aimed,
+                       floor_sd=c.floor_sd[j])
 
     def _send(self, cmd: Command) -> None:
         if self.driver is not None:
             self.driver.set_target(cmd.pan, cmd.tilt, cmd.zoom)
-            time.sleep(0)  # hand the GIL to the driver's worker now, so that the bytes go out before the logging
+            time.sleep(0)  # hand the GIL to the driver's worker now, so that the bytes go out at once
         self._arrive_at = time.monotonic() + self._slew_time((cmd.pan, cmd.tilt, cmd.zoom))
         self.sent = (cmd.pan, cmd.tilt, cmd.zoom)
         self.sent_at = time.monotonic()
@@ -361,14 +391,18 @@ class RealTimeLoop:
 
     # -- reporting ------------------------------------------------------------------------
 
-    def _describe(self, dets, valid, tracks, command: Command | None) -> dict:
+    @staticmethod
+    def _describe(item: dict) -> dict:
+        """The log fields of a processed frame (on the drawing thread; everything in it is NumPy)."""
+        dets, command = item["dets"], item["command"]
         people = [{"r_f": round(float(dets.r_f[k]), 3), "theta_f": round(float(dets.theta_f[k]), 5),
                    "sigma_r_f": round(float(dets.sigma_r_f[k]), 3),
                    "sigma_theta_f": round(float(dets.sigma_theta_f[k]), 5),
-                   "contrast": round(float(dets.contrast[k]), 2)} for k in np.nonzero(valid)[0]]
+                   "contrast": round(float(dets.contrast[k]), 2)} for k in np.nonzero(dets.valid)[0]]
         out = {"detections": people,
                "tracks": [{"id": tr.id, "xy": [round(float(v), 3) for v in tr.position],
-                           "v": [round(float(v), 3) for v in tr.x[2:]], "captured": tr.captured} for tr in tracks]}
+                           "v": [round(float(v), 3) for v in tr.x[2:]], "captured": tr.captured}
+                          for tr in item["tracks"]]}
         if command is not None:
             out["ptz"] = {"track": command.track, "pan_deg": round(math.degrees(command.pan), 3),
                           "tilt_deg": round(math.degrees(command.tilt), 3), "zoom": round(command.zoom, 3),
@@ -418,10 +452,10 @@ class RealTimeLoop:
                        "stale_frames": self.capture.counts["stale"], "dropped_frames": self.capture.counts["dropped"],
                        "deadline_overruns": self.counts["deadline_overruns"],
                        "source_ended": self.stop_reason == "source ended"},
+            "off_path": self.off_path.summary() if self.off_path is not None else None,
             "counts": self.counts,
             "captures": self.selector.captures,
             "config": {"zoom_rule": self.cfg.zoom_rule, "tracker": self.cfg.tracker, "target": self.cfg.target,
                        "dwell_s": self.cfg.dwell_s, "dead_zone_sd": self.cfg.dead_zone_sd,
                        "inputs": list(INPUT_NAMES)},
         }
-

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
+import jax
 import numpy as np
 
 from omnijax import Rig, build_detector, learn_background
@@ -97,18 +98,19 @@ class Annotator:
         if hasattr(self.foveal, "warm_up"):
             self.foveal.warm_up()
 
-    def __call__(self, record, frame, dets, z, tracks, command) -> dict:
+    def __call__(self, record, frame, dets, z, tracks, command, status) -> dict:
+        """Draw the view of a processed frame (on the loop's drawing thread): ``tracks`` are the tracks
+        confirmed then, ``status`` the loop's counters then (:meth:`RealTimeLoop.status`)."""
         loop = self.loop
         img = draw_detections(frame.image, self.rig, dets, self.r_range)
-        confirmed = loop.tracker.confirmed()
-        draw_tracks(img, self.rig, confirmed, command.track if command is not None else None)
+        draw_tracks(img, self.rig, tracks, command.track if command is not None else None)
         inset, inset_label = (None, "PTZ")
         if self.foveal is not None:
             inset, inset_label = self.foveal(frame, loop)
-        n, elapsed = loop.counts["frames"], max(time.monotonic() - loop.t_start, 1e-9)
+        n, elapsed = status["frames"], max(status["elapsed"], 1e-9)
         lat = loop.timings.latency.recent(50) if len(loop.timings.latency) else loop.timings.compute.recent(50)
         lines = [(f"{n / elapsed:5.1f} fps   latency {np.median(lat) if lat.size else float('nan'):5.2f} ms", WHITE),
-                 (f"tracks {len(confirmed)}   faces captured {loop.selector.captures}", WHITE)]
+                 (f"tracks {len(tracks)}   faces captured {status['captures']}", WHITE)]
         if command is not None:
             lines.append((f"target #{command.track}  pan {math.degrees(command.pan):6.1f}  "
                           f"tilt {math.degrees(command.tilt):5.1f}", ORANGE))
@@ -118,14 +120,15 @@ class Annotator:
                           YELLOW))
         else:
             lines.append(("no target", GREY))
-        if loop.driver is not None:
-            c = loop.driver.counters
-            up = loop.driver.connected
+        if status["driver"] is not None:
+            c = status["driver"]
+            up = c["connected"]
             lines.append((f"PTZ {'online' if up else 'OFFLINE'}  cmds {c['commands']}  err {c['errors']}  "
                           f"reconn {c['reconnects']}", GREEN if up else RED))
-        faults = loop.counts["broken"] + loop.counts["wrong_size"]
-        lines.append((f"faults: broken {loop.counts['broken']}  size {loop.counts['wrong_size']}  "
-                      f"stale {loop.capture.counts['stale']}", RED if faults else GREY))
+        counts = status["counts"]
+        faults = counts["broken"] + counts["wrong_size"]
+        lines.append((f"faults: broken {counts['broken']}  size {counts['wrong_size']}  "
+                      f"stale {status['capture']['stale']}", RED if faults else GREY))
         clock = f"frame {frame.index:6d}   t {frame.stamp:8.2f} s"
         self.last = compose_view(img, inset, self.title, clock, lines, inset_label)
         for sink in self.sinks:
@@ -164,11 +167,12 @@ def chain_hooks(*hooks) -> Callable:
 def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=None, config: LoopConfig,
                 paced: bool = True, background_frames: int | None = None, background_step: int = 1,
                 video: bool = True, record: bool = False,
-                title: str = "omnijax", foveal: Callable | None = None, hooks: tuple = (),
+                title: str = "omnijax", foveal: Callable | None = None, hooks: tuple = (), control_hooks: tuple = (),
                 finish: Callable | None = None, extra: dict | None = None, screenshot_at: int | None = None) -> dict:
     """Run the loop on ``source`` and write the outputs to ``out`` (see the module docstring).
 
-    ``hooks`` are extra ``on_frame`` hooks (the demo's scorer, fault injection); ``record`` writes
+    ``hooks`` are extra ``on_frame`` hooks (the demo's scorer), run on the drawing thread;
+    ``control_hooks`` run on the control thread at their frame (fault injection); ``record`` writes
     the processed omni frames as they came (``omni.avi``, to replay with ``omnijax run``); ``finish(summary)``
     may add to the summary before it is written; ``screenshot_at`` saves that processed frame's
     view as ``view.png``. Returns the summary.
@@ -182,7 +186,7 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
             loop, annot, writer, recorder, first = _start(
                 rig, source, stage, driver=driver, profile=profile, config=config, paced=paced, n_bg=n_bg,
                 background_step=background_step, video=video, record=record, title=title, foveal=foveal,
-                hooks=hooks, screenshot_at=screenshot_at)
+                hooks=hooks, control_hooks=control_hooks, screenshot_at=screenshot_at)
         setup_s = time.monotonic() - t0
         loop.install_signal_handlers()
         try:
@@ -222,7 +226,7 @@ def _source_counters(source) -> dict | None:
 
 def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: LoopConfig, paced: bool, n_bg: int,
            background_step: int, video: bool, record: bool, title: str, foveal, hooks: tuple,
-           screenshot_at: int | None):
+           control_hooks: tuple, screenshot_at: int | None):
     """Start-up of :func:`run_session`: the background, the detector, the writers, the loop, compiled."""
     W, H = rig.omni.image_size
     frames = source.frames()
@@ -235,11 +239,12 @@ def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: Lo
     annot = Annotator(rig, title, foveal, [writer.write] if writer else [])
     capture = Capture(source, paced=paced, frames=frames, first_index=first, shape=(H, W, 3))
     loop = RealTimeLoop(rig, detector, bg, capture, driver, profile, config, stage / "log.jsonl",
-                        on_frame=chain_hooks(*hooks, annot if (video or screenshot_at is not None) else None))
+                        on_frame=chain_hooks(*hooks, annot if (video or screenshot_at is not None) else None),
+                        on_control=chain_hooks(*control_hooks) if control_hooks else None)
     annot.loop = loop
 
-    def shoot(record, frame, *_):
-        if screenshot_at is not None and loop.counts["frames"] == screenshot_at and annot.last is not None:
+    def shoot(record, frame, dets, z, tracks, command, status):
+        if screenshot_at is not None and status["frames"] == screenshot_at and annot.last is not None:
             cv2.imwrite(str(stage / "view.png"), cv2.cvtColor(annot.last, cv2.COLOR_RGB2BGR))
         return {}
 
@@ -251,7 +256,7 @@ def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: Lo
         return {}
 
     loop.on_frame = chain_hooks(loop.on_frame, shoot, rec)
-    blank_dets = loop.warm_up()
+    blank_dets = jax.device_get(loop.warm_up())
     if video or screenshot_at is not None:
         annot.warm_up(np.zeros((H, W, 3), np.uint8), blank_dets)
     return loop, annot, writer, recorder, first

@@ -3,9 +3,10 @@ filter with optimal assignment (the default).
 
 Measurements are floor positions with covariances (``omnijax._track.floor_measurement``). The
 Kalman filter's state is (X, Y, vX, vY) in metres and m/s, with white-acceleration process noise;
-detections are assigned to tracks by SciPy's ``linear_sum_assignment`` on the Mahalanobis distance,
+detections are assigned to tracks by the optimal (Hungarian) assignment on the Mahalanobis distance,
 gated at its chi-square(2) 99.9 % quantile. A track is confirmed after ``confirm`` hits and dropped
-after ``max_misses`` frames without a detection.
+after ``max_misses`` frames without a detection. The arithmetic (prediction, costs, assignment,
+update) is vectorised and jitted in :mod:`runtime.realtime.kalman`; this module keeps the bookkeeping.
 """
 
 from __future__ import annotations
@@ -14,10 +15,10 @@ import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
-from scipy.stats import chi2
 
-GATE = float(chi2.ppf(0.999, 2))
+from runtime.realtime import kalman
+
+GATE = kalman.GATE
 
 
 @dataclass
@@ -45,17 +46,12 @@ class Track:
 
 
 def constant_velocity(dt: float, accel_sd: float) -> tuple[np.ndarray, np.ndarray]:
-    """Transition and process noise of the constant-velocity model over ``dt`` s (white acceleration)."""
-    F = np.eye(4)
-    F[0, 2] = F[1, 3] = dt
-    q = accel_sd**2 * np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]])
-    Q = np.zeros((4, 4))
-    Q[np.ix_([0, 2], [0, 2])] = q
-    Q[np.ix_([1, 3], [1, 3])] = q
-    return F, Q
+    """Transition and process noise of the constant-velocity model over ``dt`` s (white acceleration;
+    :func:`runtime.realtime.kalman.constant_velocity`, as NumPy arrays)."""
+    F, Q = kalman.constant_velocity(dt, accel_sd)
+    return np.asarray(F), np.asarray(Q)
 
 
-H = np.hstack([np.eye(2), np.zeros((2, 2))])
 #: The trackers (``LoopConfig.tracker``, ``--tracker``): constant-velocity Kalman, or the paper's nearest neighbour.
 TRACKERS: tuple[str, ...] = ("kalman", "nearest")
 
@@ -79,73 +75,53 @@ class Tracker:
     def confirmed(self) -> list[Track]:
         return [t for t in self.tracks if t.hits >= self.confirm and t.misses == 0]
 
+    def slots(self, n: int) -> tuple[np.ndarray, ...]:
+        """The tracks as ``n`` slot arrays for :func:`runtime.realtime.kalman.step`: x (n, 4), P (n, 4, 4),
+        t (n,), live (n,) and hits (n,) (the first ``len(tracks)`` slots, the rest empty)."""
+        x, P = np.zeros((n, 4)), np.tile(np.eye(4), (n, 1, 1))
+        t, live, hits = np.zeros(n), np.zeros(n, bool), np.zeros(n, np.int32)
+        for i, tr in enumerate(self.tracks[:n]):
+            x[i], P[i], t[i], live[i], hits[i] = tr.x, tr.P, tr.t, True, tr.hits
+        return x, P, t, live, hits
+
     def step(self, t: float, z: np.ndarray, R: np.ndarray) -> list[Track]:
         """Advance to time ``t`` with detections ``z`` (K, 2) of covariances ``R`` (K, 2, 2)."""
-        for tr in self.tracks:
-            tr.detection = None
-        if self.mode == "kalman":
-            pairs = self._assign_kalman(t, z, R)
-        else:
-            pairs = self._assign_nearest(z)
-        matched_tracks, matched_dets = set(), set()
-        for ti, k in pairs:
-            tr = self.tracks[ti]
-            self._update(tr, t, z[k], R[k])
-            tr.hits += 1
-            tr.misses = 0
-            tr.detection = int(k)
-            matched_tracks.add(ti)
-            matched_dets.add(k)
-        for ti, tr in enumerate(self.tracks):
-            if ti not in matched_tracks:
+        k = len(z)
+        n, kk = _bucket(len(self.tracks)), _bucket(k)
+        zp, Rp, valid = np.zeros((kk, 2)), np.tile(np.eye(2), (kk, 1, 1)), np.arange(kk) < k
+        zp[:k], Rp[:k] = z, R
+        x, P, t_tr, live, _ = self.slots(n)
+        assign, x_new, P_new = kalman.step_jit(self.mode, self.accel_sd, self.nearest_gate_m, x, P, t_tr, live,
+                                                t, zp, Rp, valid)
+        return self.apply(t, z, R, np.asarray(assign), np.asarray(x_new), np.asarray(P_new))
+
+    def apply(self, t: float, z: np.ndarray, R: np.ndarray, assign: np.ndarray, x_new: np.ndarray,
+              P_new: np.ndarray) -> list[Track]:
+        """The bookkeeping of a step whose arithmetic :func:`runtime.realtime.kalman.step` did: track
+        ``i`` took detection ``assign[i]`` (-1: none) and has state ``x_new[i]``, ``P_new[i]``; then
+        hits and misses, dropping, and a new track at each detection nobody took."""
+        matched = set()
+        for i, tr in enumerate(self.tracks):
+            k = int(assign[i]) if i < len(assign) else -1
+            if k >= 0:
+                tr.x, tr.P, tr.t = x_new[i], P_new[i], t
+                tr.hits += 1
+                tr.misses = 0
+                tr.detection = k
+                matched.add(k)
+            else:
                 tr.misses += 1
+                tr.detection = None
         self.tracks = [tr for tr in self.tracks if tr.misses <= self.max_misses]
         for k in range(len(z)):
-            if k not in matched_dets:
+            if k not in matched:
                 P = np.zeros((4, 4))
                 P[:2, :2] = R[k]
                 P[2:, 2:] = self.speed_sd**2 * np.eye(2)
                 self.tracks.append(Track(id=next(self._ids), x=np.r_[z[k], 0.0, 0.0], P=P, t=t, detection=k))
         return self.tracks
 
-    def _update(self, tr: Track, t: float, z: np.ndarray, R: np.ndarray) -> None:
-        if self.mode == "nearest":
-            tr.x = np.r_[z, 0.0, 0.0]
-            tr.P = np.zeros((4, 4))
-            tr.P[:2, :2] = R
-            tr.t = t
-            return
-        x, P = tr.predict(t, self.accel_sd)
-        S = H @ P @ H.T + R
-        K = P @ H.T @ np.linalg.inv(S)
-        tr.x = x + K @ (z - H @ x)
-        tr.P = (np.eye(4) - K @ H) @ P
-        tr.t = t
 
-    def _assign_kalman(self, t, z, R) -> list[tuple[int, int]]:
-        if not self.tracks or not len(z):
-            return []
-        cost = np.full((len(self.tracks), len(z)), 1e6)
-        for i, tr in enumerate(self.tracks):
-            x, P = tr.predict(t, self.accel_sd)
-            S = H @ P @ H.T + R  # (K, 2, 2)
-            d = z - x[:2]
-            m = np.einsum("ka,kab,kb->k", d, np.linalg.inv(S), d)
-            cost[i] = np.where(m <= GATE, m + np.log(np.linalg.det(S)), 1e6)
-        rows, cols = linear_sum_assignment(cost)
-        return [(r, c) for r, c in zip(rows, cols) if cost[r, c] < 1e6]
-
-    def _assign_nearest(self, z) -> list[tuple[int, int]]:
-        pairs, used = [], set()
-        if not self.tracks or not len(z):
-            return pairs
-        dist = np.linalg.norm(np.stack([tr.position for tr in self.tracks])[:, None] - z[None], axis=-1)
-        for flat in np.argsort(dist, axis=None):
-            i, k = np.unravel_index(flat, dist.shape)
-            if dist[i, k] > self.nearest_gate_m:
-                break
-            if i in {p[0] for p in pairs} or k in used:
-                continue
-            pairs.append((int(i), int(k)))
-            used.add(k)
-        return pairs
+def _bucket(n: int) -> int:
+    """Slots for ``n`` tracks or detections: a power of two, at least 8 (few compiled shapes)."""
+    return max(8, 1 << (max(n, 1) - 1).bit_length())

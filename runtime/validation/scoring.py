@@ -66,7 +66,7 @@ class DemoScorer:
         self.p_contain = float(world.rig.p_contain)
         self.last_target_error: float | None = None
 
-    def __call__(self, record, frame, dets, z, tracks, command) -> dict:
+    def __call__(self, record, frame, dets, z, tracks, command, *_) -> dict:
         truth = self.source.take_truth(frame.index)
         if truth is None:
             return {}

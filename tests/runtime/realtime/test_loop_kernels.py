@@ -66,3 +66,47 @@ def test_update_background_adapts_outside_the_sectors_only(paper_detector, paper
                                rtol=1e-6)
     for a, b in zip(jax.tree.leaves(new_lines), jax.tree.leaves(line_background(paper_detector, new))):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_control_step_is_the_tracker_and_the_aim_pipeline_fused(paper_detector, paper_rig, scene):
+    """The one per-frame call against its parts called one by one: a confirmed track near the painted
+    person is updated as Tracker.step updates it, and aimed at as aim_at_floor aims at its head
+    predicted over the slew time from the last command to where a first aim points."""
+    import copy
+
+    from omnijax import aim_at_floor
+    from omnijax.zoom import ZOOM_RULES
+    from runtime.realtime import kalman
+    from runtime.realtime.control import Slew, control_step, pan_tilt_slew_s
+    from runtime.realtime.tracker import Track, Tracker
+
+    bg, lines, frame, _ = scene
+    dets, _, z, R = perceive(paper_detector, paper_rig, frame, bg, lines)
+    valid = np.asarray(dets.valid)
+    k = int(np.argmax(valid))
+    zk = np.asarray(z[k])
+    tracker = Tracker("kalman")
+    tracker.tracks = [Track(id=1, x=np.r_[zk + [0.05, -0.03], 0.2, 0.1], P=np.diag([0.02, 0.02, 0.3, 0.3]),
+                            t=0.96, hits=2),
+                      Track(id=2, x=np.array([9.0, 9.0, 0.0, 0.0]), P=np.eye(4), t=0.96, hits=5)]
+    reference = copy.deepcopy(tracker)
+    sent = (0.3, -0.6)
+    slew = Slew(known=jnp.asarray(True), pan=jnp.asarray(sent[0]), tilt=jnp.asarray(sent[1]),
+                pan_deg_s=jnp.asarray(300.0), tilt_deg_s=jnp.asarray(125.0), latency_s=jnp.asarray(0.03))
+    c = control_step(paper_detector, paper_rig, frame, bg, lines, tracker.slots(32), jnp.asarray(1.0), 1.5, 0.8,
+                     slew, mode="kalman", confirm=2)
+    assign = np.asarray(c.assign)
+    assert assign[0] == k and (assign[1:] == -1).all()
+    reference.step(1.0, np.asarray(z)[valid], np.asarray(R)[valid])
+    tr = reference.tracks[0]
+    np.testing.assert_allclose(np.asarray(c.x[0]), tr.x, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(np.asarray(c.P[0]), tr.P, rtol=1e-12, atol=1e-14)
+    assert np.asarray(c.aim_ok).tolist() == [True] + [False] * (len(valid) - 1) and int(c.aim_slot[0]) == 0
+    now = aim_at_floor(paper_rig, jnp.asarray(tr.x[:2]), jnp.asarray(tr.P[:2, :2]), ZOOM_RULES).pointing
+    lead = 0.03 + float(pan_tilt_slew_s(now.pan, now.tilt, *sent, 300.0, 125.0))
+    assert lead > 0.0 and float(c.lead[0]) == pytest.approx(lead, rel=1e-12)
+    xp, Pp = kalman.predict(jnp.asarray(tr.x), jnp.asarray(tr.P), lead, 1.5)
+    want = aim_at_floor(paper_rig, xp[:2], Pp[:2, :2], ZOOM_RULES)
+    got = jax.tree.map(lambda a: a[0], c.aims)
+    for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(want)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-12)

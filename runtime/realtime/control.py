@@ -1,0 +1,110 @@
+"""The loop's one compiled call per frame: frame -> detections -> tracks -> pan/tilt/zoom.
+
+:func:`control_step` fuses, with no host round trip in between:
+
+1. detection and the detections' floor positions with covariances (:func:`perceive`: the detector
+   and the aim pipeline's :func:`~omnijax.aiming.floor_from_detections`);
+2. the tracker's arithmetic over its slots (:func:`runtime.realtime.kalman.step`: prediction,
+   gated costs, the assignment, the update);
+3. for every track confirmed after this frame (at most ``max_people``, since a confirmed track was
+   just matched), the aim pipeline (:func:`~omnijax.aiming.aim_at_floor`, vmapped): the head
+   predicted to when the PTZ's pan and tilt get there from the last command (their slew time
+   from the pan/tilt of a first aim at the track as it is now; the zoom keeps adjusting
+   meanwhile and does not lengthen the horizon), pan/tilt, their covariance and the zoom of
+   every rule.
+
+The host then does the bookkeeping (:meth:`~runtime.realtime.tracker.Tracker.apply`), asks the
+target selector which track to look at (a plain call, its rules are its own) and takes that
+track's aim: no second aim call whichever track it picks.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from omnijax import Aim, Detector, Rig, aim_at_floor, detect, floor_from_detections
+from omnijax.geometry import wrap_pi
+from omnijax.zoom import ZOOM_RULES
+from runtime.realtime import kalman
+
+
+@jax.jit
+def perceive(detector: Detector, rig: Rig, frame, bg, lines):
+    """Detection (steps 1-6) and the detections' floor positions with covariances (the aim
+    pipeline's :func:`~omnijax.aiming.floor_from_detections`, under its sigma rule)."""
+    dets, trace = detect(detector, frame, bg, lines)
+    z, R = floor_from_detections(rig, dets.r_f, dets.theta_f, dets.sigma_r_f, dets.sigma_theta_f)
+    return dets, trace, z, R
+
+
+def pan_tilt_slew_s(pan, tilt, sent_pan, sent_tilt, pan_deg_s, tilt_deg_s):
+    """Seconds the PTZ's pan and tilt need from (``sent_pan``, ``sent_tilt``) to (``pan``, ``tilt``) rad
+    at their slew rates (deg/s): the slower axis."""
+    d_pan = jnp.abs(wrap_pi(pan - sent_pan)) * (180.0 / math.pi)
+    d_tilt = jnp.abs(tilt - sent_tilt) * (180.0 / math.pi)
+    return jnp.maximum(d_pan / pan_deg_s, d_tilt / tilt_deg_s)
+
+
+class Slew(eqx.Module):
+    """What the head's prediction horizon needs: whether a command was sent (and a PTZ profile is
+    known: otherwise the horizon is 0), its pan and tilt (rad), the slew rates (deg/s) and the device's
+    command latency (s, the profile's ``link.command_latency_s``)."""
+
+    known: jax.Array
+    pan: jax.Array
+    tilt: jax.Array
+    pan_deg_s: jax.Array
+    tilt_deg_s: jax.Array
+    latency_s: jax.Array
+
+
+class Control(eqx.Module):
+    """One frame's result. Tracker: ``assign`` (N,) each slot's detection (-1: none), ``x`` (N, 4),
+    ``P`` (N, 4, 4) after the step. Aims: ``aim_slot`` (A,) the slots of the confirmed tracks
+    (``aim_ok`` (A,) which entries are real), ``aims`` their :class:`~omnijax.aiming.Aim` (batched),
+    ``lead`` (A,) the prediction horizon (s) and ``floor_sd`` (A, 2) the sd of the predicted floor
+    position (m)."""
+
+    dets: object
+    z: jax.Array
+    R: jax.Array
+    assign: jax.Array
+    x: jax.Array
+    P: jax.Array
+    aim_slot: jax.Array
+    aim_ok: jax.Array
+    aims: Aim
+    lead: jax.Array
+    floor_sd: jax.Array
+
+
+@functools.partial(jax.jit, static_argnames=("mode", "confirm"))
+def control_step(detector: Detector, rig: Rig, frame, bg, lines, slots, t, accel_sd, nearest_gate_m,
+                 slew: Slew, mode: str = "kalman", confirm: int = 2) -> Control:
+    """Frame -> detections -> tracks -> pan/tilt/zoom of every confirmed track, in one compiled call
+    (see the module docstring). ``slots``: the tracker's (x, P, t, live, hits) slot arrays
+    (:meth:`~runtime.realtime.tracker.Tracker.slots`); ``t``: the frame's time (s); ``mode``,
+    ``accel_sd``, ``nearest_gate_m``, ``confirm``: the tracker's settings."""
+    dets, _, z, R = perceive(detector, rig, frame, bg, lines)
+    x, P, t_tracks, live, hits = slots
+    assign, x_new, P_new = kalman.step(mode, accel_sd, nearest_gate_m, x, P, t_tracks, live, t, z, R, dets.valid)
+    confirmed = (assign >= 0) & (hits + 1 >= confirm)
+    n_aim = dets.valid.shape[0]
+    aim_slot = jnp.nonzero(confirmed, size=n_aim, fill_value=0)[0]
+    aim_ok = jnp.arange(n_aim) < confirmed.sum()
+
+    def one(x, P):
+        now = aim_at_floor(rig, x[:2], P[:2, :2], ZOOM_RULES).pointing  # only pan/tilt are kept (the rest is dead)
+        lead = jnp.where(slew.known, slew.latency_s + pan_tilt_slew_s(now.pan, now.tilt, slew.pan, slew.tilt,
+                                                                      slew.pan_deg_s, slew.tilt_deg_s), 0.0)
+        xp, Pp = kalman.predict(x, P, lead, accel_sd)
+        return aim_at_floor(rig, xp[:2], Pp[:2, :2], ZOOM_RULES), lead, jnp.sqrt(jnp.diagonal(Pp)[:2])
+
+    aims, lead, floor_sd = jax.vmap(one)(x_new[aim_slot], P_new[aim_slot])
+    return Control(dets=dets, z=z, R=R, assign=assign, x=x_new, P=P_new, aim_slot=aim_slot, aim_ok=aim_ok,
+                   aims=aims, lead=lead, floor_sd=floor_sd)
