@@ -25,6 +25,8 @@ PACES: tuple[str, ...] = ("live", "all")
 MAX_FRAMES = 1_000_000
 #: The PTZ protocols (``--protocol``) of the device profiles.
 PROTOCOLS = Names("runtime.ptz.profile:PROTOCOLS")
+#: The emulated cameras (``--protocol`` of ptz-emulator and demo): the profile protocols and the network ones.
+EMULATED = Names("runtime.ptz.transports:EMULATED")
 
 
 class _Deprecated(argparse.Action):

@@ -42,7 +42,7 @@ DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "configs" / "scenarios"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from runtime.cli._options import PACES, PROTOCOLS, add_loop_options
+    from runtime.cli._options import EMULATED, PACES, add_loop_options
 
     p = sub.add_parser("demo", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -55,8 +55,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pace", choices=PACES, default="live",
                    help="live: frames arrive at the scenario's rate, late ones are dropped (default); "
                         "all: every frame is processed, as fast as possible")
-    p.add_argument("--protocol", choices=PROTOCOLS, default="visca", metavar="NAME",
-                   help="protocol of the emulated PTZ: %(choices)s (default visca)")
+    p.add_argument("--protocol", choices=EMULATED, default="visca", metavar="NAME",
+                   help="protocol of the emulated PTZ: %(choices)s (default visca; visca-ip: VISCA over IP, "
+                        "through the UDP stack)")
     p.add_argument("--inset-every", type=int, default=8, metavar="K",
                    help="re-render the foveal inset every K frames (default 8; ray casting is slow)")
     p.add_argument("--background-step", type=int, default=8, metavar="K",
@@ -126,8 +127,9 @@ def run(args: argparse.Namespace) -> int:
 
     from omnijax.world import build_world
     from runtime.files import load_scenario
-    from runtime.ptz import PtzDriver, PtzError
+    from runtime.ptz import PtzError, make_driver
     from runtime.ptz.child import EmulatorProcess
+    from runtime.ptz.transports import EMULATED
     from runtime.realtime.session import run_session
     from runtime.realtime.sources import FaultySource, SyntheticSource
     from runtime.validation.scoring import DemoScorer
@@ -143,10 +145,10 @@ def run(args: argparse.Namespace) -> int:
         synthetic = SyntheticSource(world)
         source = FaultySource(synthetic, plan) if not plan.empty else synthetic
         scorer = DemoScorer(world, synthetic)
-    profile = load_ptz_profile(None, args.protocol)
+    profile = load_ptz_profile(None, EMULATED[args.protocol])
     # the emulator is stopped when this block is left in any way, and stops by itself if this process dies
     with interrupted_during("during start-up"), EmulatorProcess(args.protocol) as emulator:
-        driver = PtzDriver(str(emulator.link), profile)
+        driver = make_driver(emulator.url, profile)
         try:
             driver.connect(timeout=10)
         except PtzError as exc:

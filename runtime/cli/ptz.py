@@ -8,8 +8,9 @@ import sys
 
 HELP = "send one pan/tilt/zoom to a PTZ camera, or ask where it is"
 DESCRIPTION = """\
-Connect to a PTZ camera over a pyserial URL (/dev/ttyUSB0, socket://host:port,
-or the path printed by `omnijax ptz-emulator`), optionally send one target in
+Connect to a PTZ camera, over a pyserial URL (/dev/ttyUSB0, socket://host:port,
+or the path printed by `omnijax ptz-emulator`) or VISCA over IP
+(visca-udp://HOST[:PORT], port 52381 by default), optionally send one target in
 omnijax's frame (pan from the direction of the omni camera's axis, tilt up
 positive, degrees; zoom factor) through the device profile's mounting and
 limits, wait until the camera reports it reached it, and print where it is:
@@ -34,7 +35,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("ptz", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     deprecated_alias(p, "--port", p.add_argument("--ptz", metavar="URL",
-                                                   help="pyserial URL of the camera's serial line (required)"))
+                                                   help="the camera: a pyserial URL of its serial line, or "
+                                                        "visca-udp://HOST[:PORT] (required)"))
     add_ptz_profile_option(p, "device profile: a TOML file or a name in configs/devices (default: per --protocol)")
     p.add_argument("--protocol", choices=PROTOCOLS, metavar="NAME",
                    help="%(choices)s: the shipped profile to use when --ptz-profile is not given (default visca); "
@@ -54,11 +56,12 @@ def run(args: argparse.Namespace) -> int:
     from runtime.cli._options import load_ptz_profile
     from runtime.errors import UsageError
     from runtime.output import dumps
-    from runtime.ptz import PtzDriver, PtzError, PtzPortError
+    from runtime.ptz import PtzError, PtzPortError, make_driver
+    from runtime.ptz.transports import required_protocol
 
     if args.ptz is None:
-        raise UsageError("--ptz: expected the camera's pyserial URL (/dev/ttyUSB0, socket://host:port, ...)")
-    profile = load_ptz_profile(args.ptz_profile, args.protocol)
+        raise UsageError("--ptz: expected the camera's URL (/dev/ttyUSB0, socket://host:port, visca-udp://host, ...)")
+    profile = load_ptz_profile(args.ptz_profile, args.protocol or required_protocol(args.ptz))
     given = [v is not None for v in (args.pan_deg, args.tilt_deg, args.zoom)]
     if any(given) and not all(given):
         raise UsageError("--pan-deg, --tilt-deg, --zoom: give all three, or none to only ask the position")
@@ -76,8 +79,8 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"{flag}: expected a positive number of seconds, got {value}")
 
     report: dict = {"port": args.ptz, "profile": profile.name, "protocol": profile.protocol}
-    driver = PtzDriver(args.ptz, profile)
     try:
+        driver = make_driver(args.ptz, profile)
         driver.connect(timeout=args.timeout)
     except PtzPortError as exc:
         raise UsageError(f"--ptz: {exc}") from None

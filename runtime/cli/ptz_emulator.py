@@ -1,4 +1,4 @@
-"""``omnijax ptz-emulator``: a VISCA or Pelco-D camera on a pseudo-terminal (docs/design.md section 7.4)."""
+"""``omnijax ptz-emulator``: a VISCA or Pelco-D camera on a pseudo-terminal, or VISCA over IP on UDP (docs/ptz.md)."""
 
 from __future__ import annotations
 
@@ -12,14 +12,23 @@ from pathlib import Path
 
 from runtime.errors import UsageError
 
-HELP = "a VISCA or Pelco-D camera on a pseudo-terminal, for tests, demos and trying a set-up"
+HELP = "a VISCA or Pelco-D camera on a pseudo-terminal, or VISCA over IP on UDP, for tests, demos and set-ups"
 DESCRIPTION = """\
-Open a pseudo-terminal, print its device path as the first line on stdout, and
+Open a pseudo-terminal (visca, pelco-d) or a UDP socket (visca-ip: VISCA over IP,
+Sony's 8-byte header, bound to --listen HOST:PORT, default 127.0.0.1 and a free
+port), print its address as the first line on stdout (the pty's path, or
+udp://HOST:PORT; the driver's URL is then visca-udp://HOST:PORT), and
 behave like a PTZ camera on it until killed (SIGTERM or Ctrl-C exit cleanly):
 slew-rate-limited motion from the device profile, position inquiries, ACK and
 completion replies, and error replies to bad packets (VISCA: message length,
 syntax, buffer full, cancelled, no socket, not executable; Pelco-D ignores and
-counts bad packets). Point anything that speaks pyserial at the printed path.
+counts bad packets; an unknown VISCA command gets a syntax error 90 60 02 FF).
+Over IP it also answers RESET (sequence number reset), a sequence number that
+goes backwards with a sequence error (control reply 0F 01), a malformed datagram
+with a message error (0F 02), and a repeated sequence number (a retry) with the
+replies already given, without executing it twice. --latency-ms delays every
+packet before the camera sees it (a camera's command latency, for `omnijax ptz
+calibrate` to measure).
 
 --state-file F keeps F updated (atomically) with a JSON object: pan_deg,
 tilt_deg (the device's own angles), zoom (magnification), commands, errors,
@@ -30,17 +39,21 @@ reopen the same path after the emulator is restarted.
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from runtime.cli._options import PROTOCOLS, add_ptz_profile_option
+    from runtime.cli._options import EMULATED, add_ptz_profile_option
 
     p = sub.add_parser("ptz-emulator", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--protocol", required=True, choices=PROTOCOLS, metavar="NAME", help="%(choices)s")
+    p.add_argument("--protocol", required=True, choices=EMULATED, metavar="NAME", help="%(choices)s")
+    p.add_argument("--listen", metavar="HOST:PORT",
+                   help="visca-ip: address to bind (default 127.0.0.1:0, a free port)")
+    p.add_argument("--latency-ms", type=float, default=0.0, metavar="MS",
+                   help="delay every received packet by MS before the camera sees it (default 0)")
     p.add_argument("--address", type=int, metavar="N",
                    help="camera address (VISCA: place on the chain, 1-7; Pelco-D: 1-255); default: the profile's")
     add_ptz_profile_option(p, "device profile: a TOML file or a name in configs/devices "
                               "(default: sony_evi_d70 for visca, pelco_d_dome for pelco-d)")
     p.add_argument("--state-file", metavar="F", help="keep F updated with the camera's state (JSON)")
-    p.add_argument("--link", metavar="PATH", help="keep a symlink PATH pointing at the pty")
+    p.add_argument("--link", metavar="PATH", help="keep a symlink PATH pointing at the pty (pty protocols)")
     p.add_argument("--faults", default="", metavar="SPEC",
                    help="inject faults per reply, e.g. 'garble=0.05,drop=0.01,noise=0.05,buffer_full=0.1'")
     p.add_argument("--seed", type=int, default=0, help="seed of the injected faults (default 0)")
@@ -53,11 +66,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from runtime.cli._options import load_ptz_profile
     from runtime.output import check_output_file
-    from runtime.ptz import Faults, PtyEmulator
+    from runtime.ptz import Faults, PtyEmulator, UdpEmulator
+    from runtime.ptz.transports import EMULATED
 
-    profile = load_ptz_profile(args.ptz_profile, args.protocol)
+    network = args.protocol == "visca-ip"
+    profile = load_ptz_profile(args.ptz_profile, EMULATED[args.protocol])
     parent_alive = _watch(args.parent_pid) if args.parent_pid is not None else None
-    top = 7 if args.protocol == "visca" else 255
+    if args.listen is not None and not network:
+        raise UsageError(f"--listen: only for --protocol visca-ip (a {args.protocol} emulator is on a pty)")
+    if args.link is not None and network:
+        raise UsageError("--link: only for the pty protocols (visca, pelco-d); visca-ip listens on --listen")
+    if not (0 <= args.latency_ms <= 10_000):
+        raise UsageError(f"--latency-ms: expected 0-10000 ms, got {args.latency_ms:g}")
+    listen = _listen(args.listen) if network else None
+    top = 7 if profile.protocol == "visca" else 255
     if args.address is not None and not 1 <= args.address <= top:
         raise UsageError(f"--address: expected 1-{top} for {args.protocol}, got {args.address}")
     try:
@@ -70,20 +92,42 @@ def run(args: argparse.Namespace) -> int:
     if args.link is not None and Path(args.link).exists() and not Path(args.link).is_symlink():
         raise UsageError(f"--link: {args.link} exists and is not a symlink; expected a new path or an old link")
 
-    emulator = PtyEmulator(profile, args.address, state_file=args.state_file, link=args.link,
-                           faults=faults, seed=args.seed)
+    if network:
+        if args.address is not None and args.address != 1:
+            raise UsageError(f"--address: VISCA over IP cameras answer as address 1, got {args.address}")
+        try:
+            emulator = UdpEmulator(profile, listen, state_file=args.state_file, faults=faults, seed=args.seed,
+                                   latency_s=args.latency_ms / 1e3)
+        except OSError as exc:
+            raise UsageError(f"--listen: cannot bind {listen[0]}:{listen[1]} ({exc.strerror or exc})") from None
+        where = emulator.url
+    else:
+        emulator = PtyEmulator(profile, args.address, state_file=args.state_file, link=args.link,
+                               faults=faults, seed=args.seed, latency_s=args.latency_ms / 1e3)
+        where = emulator.path
     try:
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: emulator.stop())
         if parent_alive is not None:
             _stop_when_gone(emulator, parent_alive)
-        print(emulator.path, flush=True)
-        print(f"omnijax ptz-emulator: {profile.name} ({profile.protocol}, address {emulator.camera.address}) on "
-              f"{emulator.path}" + (f", linked from {args.link}" if args.link else ""), file=sys.stderr, flush=True)
+        print(where, flush=True)
+        print(f"omnijax ptz-emulator: {profile.name} ({args.protocol}, address {emulator.camera.address}) on "
+              f"{where}" + (f", linked from {args.link}" if args.link else ""), file=sys.stderr, flush=True)
         emulator.serve()
     finally:
         emulator.close()
     return 0
+
+
+def _listen(spec: str | None) -> tuple[str, int]:
+    """``--listen HOST:PORT`` (``[v6]:PORT`` too); one line naming the flag if malformed."""
+    if spec is None:
+        return ("127.0.0.1", 0)
+    host, sep, port = spec.rpartition(":")
+    host = host.strip("[]")
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise UsageError(f"--listen: expected HOST:PORT with a port 0-65535, got {spec!r}")
+    return host, int(port)
 
 
 def _watch(pid: int):

@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
 
     from runtime.files import load_rig
     from runtime.frames import FolderSource, SourceError, open_source
-    from runtime.ptz import PtzDriver, PtzError
+    from runtime.ptz import PtzError, make_driver
     from runtime.realtime.session import run_session
     from runtime.realtime.sources import FaultySource
 
@@ -80,8 +80,8 @@ def run(args: argparse.Namespace) -> int:
     pace = args.pace or ("all" if isinstance(source, FolderSource) and args.fps is None else "live")
     driver = None
     if args.ptz:
-        driver = PtzDriver(args.ptz, profile)
         try:
+            driver = make_driver(args.ptz, profile)
             driver.connect(timeout=5)
         except PtzError as exc:
             source.close()

@@ -4,11 +4,13 @@
 - :mod:`runtime.ptz.profile`: device profiles (``configs/devices/*.toml``); the one place where
   omnijax pan/tilt/zoom become device units.
 - :mod:`runtime.ptz.driver`: :class:`PtzDriver` over any pyserial URL.
-- :mod:`runtime.ptz.emulator`: cameras on a pseudo-terminal (``omnijax ptz-emulator``).
+- :mod:`runtime.ptz.visca_ip`: VISCA over IP framing, the camera's side, the driver's UDP port.
+- :mod:`runtime.ptz.transports`: which driver and transport a ``--ptz`` URL selects (the one dispatch).
+- :mod:`runtime.ptz.emulator`: cameras on a pseudo-terminal or a UDP socket (``omnijax ptz-emulator``).
 """
 
 from .driver import PtzDriver, PtzError, PtzPortError
-from .emulator import Faults, PelcoDCamera, PtyEmulator, ViscaCamera
+from .emulator import Faults, PelcoDCamera, PtyEmulator, UdpEmulator, ViscaCamera
 from .profile import (
     DeviceProfile,
     DeviceTarget,
@@ -18,8 +20,11 @@ from .profile import (
     load_profile,
     parse_profile,
 )
+from .transports import Capabilities, make_driver
 
 __all__ = [
-    "DeviceProfile", "DeviceTarget", "Faults", "PelcoDCamera", "ProfileError", "PtyEmulator", "PtzDriver",
-    "PtzError", "PtzPortError", "PtzPosition", "ViscaCamera", "default_profile", "load_profile", "parse_profile",
+    "Capabilities", "DeviceProfile", "DeviceTarget", "Faults", "PelcoDCamera", "ProfileError", "PtyEmulator",
+    "PtzDriver",
+    "PtzError", "PtzPortError", "PtzPosition", "UdpEmulator", "ViscaCamera", "default_profile", "load_profile",
+    "make_driver", "parse_profile",
 ]

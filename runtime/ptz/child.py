@@ -1,9 +1,11 @@
-"""The PTZ emulator as a child process on a pseudo-terminal, for the demo and the tests.
+"""The PTZ emulator as a child process (pseudo-terminal or network), for the demo and the tests.
 
-:class:`EmulatorProcess` runs ``omnijax ptz-emulator`` with ``--link`` (a stable path that
-follows the pty) and ``--state-file``; the driver opens the link. :meth:`unplug` kills the
-emulator, so the port vanishes as when a USB adapter is pulled, and starts a new one on the
-same link after a delay, as when it is plugged back in.
+:class:`EmulatorProcess` runs ``omnijax ptz-emulator`` with ``--state-file`` and, on a pty,
+``--link`` (a stable path that follows the pty); over the network (``visca-ip``) it binds
+127.0.0.1 and a free port, and a restart binds the same port again. :attr:`url` is what the
+driver opens. :meth:`unplug` kills the emulator, so the port vanishes as when a USB adapter
+is pulled (or the camera loses power), and starts a new one at the same address after a
+delay, as when it is plugged back in.
 
 The child never outlives this process: it runs in its own session (Ctrl-C in a terminal
 reaches this process only), leaving the context manager in any way (an error, Ctrl-C,
@@ -35,6 +37,8 @@ class EmulatorProcess:
         self.link = self.folder / "ptz"
         self.state_file = self.folder / "ptz-state.json"
         self.protocol, self.profile = protocol, profile
+        self.network = protocol == "visca-ip"
+        self.listen = "127.0.0.1:0"
         self.proc: subprocess.Popen | None = None
         self.unplugs = 0
         self._timer: threading.Timer | None = None
@@ -43,7 +47,8 @@ class EmulatorProcess:
     def start(self) -> EmulatorProcess:
         """Start the emulator and wait for its pty (first line on its stdout)."""
         cmd = [sys.executable, "-m", "runtime.cli", "ptz-emulator", "--protocol", self.protocol,
-               "--link", str(self.link), "--state-file", str(self.state_file), "--parent-pid", str(os.getpid())]
+               "--state-file", str(self.state_file), "--parent-pid", str(os.getpid())]
+        cmd += ["--listen", self.listen] if self.network else ["--link", str(self.link)]
         if self.profile:
             cmd += ["--ptz-profile", self.profile]
         with self._lock:
@@ -54,7 +59,16 @@ class EmulatorProcess:
         if not line:
             raise RuntimeError(f"the PTZ emulator did not start (exit code {self.proc.poll()})")
         self.pty = line
+        if self.network:  # a restart binds the same port, as a camera keeps its address
+            self.listen = line.removeprefix("udp://")
         return self
+
+    @property
+    def url(self) -> str:
+        """What the driver opens: the pty's stable link, or ``visca-udp://HOST:PORT``."""
+        from runtime.ptz.transports import emulator_url
+
+        return emulator_url(self.protocol, self.pty) if self.network else str(self.link)
 
     def state(self) -> dict | None:
         """The emulated camera's state (``--state-file``)."""

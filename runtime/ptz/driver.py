@@ -29,7 +29,6 @@ or a pseudo-terminal from ``omnijax ptz-emulator``.
 from __future__ import annotations
 
 import logging
-import os
 import threading
 import time
 from collections import deque
@@ -39,7 +38,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import serial
 
+from . import transports
 from .dialect import Event, Exchange, dialect_for
+from .errors import PtzError as PtzError, PtzPortError as PtzPortError
 from .profile import DeviceProfile, DeviceTarget, PtzPosition
 
 log = logging.getLogger("omnijax.ptz")
@@ -52,14 +53,6 @@ _WRITE_TIMEOUT_S = 1.0
 _IDLE_S = 0.1
 #: Write-to-answer latencies kept for the statistics.
 _LATENCIES_KEPT = 10_000
-
-
-class PtzError(RuntimeError):
-    """The PTZ cannot be reached or did not answer (one line)."""
-
-
-class PtzPortError(PtzError):
-    """The port itself is wrong: a malformed URL, or a device path that does not exist (bad input)."""
 
 
 class _LinkLost(Exception):
@@ -85,7 +78,7 @@ class _Pending:
 class _Connection:
     """One open port and its reader thread."""
 
-    def __init__(self, port: serial.SerialBase) -> None:
+    def __init__(self, port) -> None:  # a serial.SerialBase, or a port-like transport (runtime.ptz.transports)
         self.port = port
         self.reader: threading.Thread | None = None
         self.closing = threading.Event()
@@ -124,6 +117,8 @@ class PtzDriver:
              "clamped", "superseded", "unsolicited", "garbage_bytes"), 0)
         self._latency = {"ack": deque(maxlen=_LATENCIES_KEPT), "query": deque(maxlen=_LATENCIES_KEPT)}
         self._writes: deque[tuple[int, float]] = deque(maxlen=_LATENCIES_KEPT)
+        #: what the transport counts (VISCA over IP: retries, sequence errors, stale and malformed datagrams)
+        self._transport: dict[str, int] = {}
 
     # ------------------------------------------------------------------------------------
     # Public API
@@ -138,15 +133,7 @@ class PtzDriver:
         """
         if self._worker is not None:
             return self
-        try:
-            port = serial.serial_for_url(self.port, do_not_open=True)
-            if "://" in self.port and hasattr(port, "from_url"):
-                port.from_url(self.port)  # URL handlers parse their host, port and options only when opening
-        except (ValueError, TypeError, serial.SerialException) as exc:
-            reason = "expected HOST:PORT after the scheme" if isinstance(exc, TypeError) else exc  # pyserial's
-            raise PtzPortError(f"{self.port}: not a usable serial port URL: {reason}") from None
-        if "://" not in self.port and not os.path.exists(self.port):
-            raise PtzPortError(f"{self.port}: no such serial device")
+        transports.check_port(self.port)
         self._stop.clear()
         self._worker = threading.Thread(target=self._run, name="ptz-worker", daemon=True)
         self._worker.start()
@@ -222,6 +209,21 @@ class PtzDriver:
             self._writes.clear()
         return out
 
+    def capabilities(self) -> transports.Capabilities:
+        """What this camera offers, from its protocol and profile (``omnijax ptz probe`` checks them live)."""
+        p = self.profile
+        visca = p.protocol == "visca"
+        return transports.Capabilities(
+            protocol="visca-ip" if transports.transport_of(self.port) == "udp" else p.protocol,
+            transport=transports.transport_of(self.port),
+            move_modes=("absolute",),
+            move_status="completion" if visca else "timer",
+            position=True,
+            zoom=(float(p.zoom.magnification[0]), float(p.zoom.magnification[-1])),
+            limits_deg={"pan": tuple(p.pan.limits_deg), "tilt": tuple(p.tilt.limits_deg)},
+            notes=() if visca or p.pelco_d.general_response else ("no general response: writes are not acknowledged",),
+        )
+
     def request_position(self) -> Future:
         """Ask the camera where it is; the future gives a :class:`PtzPosition` (or raises :class:`PtzError`)."""
         fut: Future = Future()
@@ -269,6 +271,7 @@ class PtzDriver:
         with self._cond:
             out: dict = dict(self._counts)
             lat = {k: list(v) for k, v in self._latency.items()}
+            out["transport"] = dict(self._transport)
         lat = {k: 1e3 * np.asarray(v) for k, v in lat.items()}
         out["connected"] = self.connected
         out["latency_ms"] = {
@@ -316,8 +319,8 @@ class PtzDriver:
 
     def _open(self) -> bool:
         try:
-            port = serial.serial_for_url(self.port, baudrate=self.profile.baudrate, timeout=_READ_TIMEOUT_S,
-                                         write_timeout=_WRITE_TIMEOUT_S)
+            port = transports.open_port(self.port, baudrate=self.profile.baudrate, timeout=_READ_TIMEOUT_S,
+                                        write_timeout=_WRITE_TIMEOUT_S, link=self._link, counters=self._transport)
             port.reset_input_buffer()
         except (serial.SerialException, OSError, ValueError) as exc:
             self.last_error = f"cannot open: {exc}"

@@ -30,6 +30,7 @@ import json
 import os
 import random
 import select
+import socket as _socket
 import threading
 import time
 import tty
@@ -346,103 +347,57 @@ class PelcoDCamera(_Camera):
         return []
 
 
-class PtyEmulator:
-    """A camera served on a pseudo-terminal; ``path`` is what a client opens with pyserial.
+class _Emulator:
+    """What the pty and UDP emulators share: the camera, injected faults, the state file, the lifetime.
 
-    ``link`` (optional) is a symlink kept pointing at the pty, so that a client
-    can reopen one path after the emulator was restarted (a new pty). The
-    ``state_file`` (optional) is rewritten atomically (temporary file and
-    rename) at most every 50 ms while something changes. Use :meth:`serve`
-    in the calling thread, or :meth:`start` / :meth:`close` (a context manager)
-    for a background thread.
+    ``latency_s`` delays every packet received before the camera sees it (a camera's
+    command latency, for ``omnijax ptz calibrate`` to measure).
     """
 
-    def __init__(self, profile: DeviceProfile, address: int | None = None, *, state_file: str | Path | None = None,
-                 link: str | Path | None = None, faults: Faults = Faults(), seed: int = 0) -> None:
+    def __init__(self, profile: DeviceProfile, address: int | None, *, state_file: str | Path | None,
+                 faults: Faults, seed: int, latency_s: float = 0.0) -> None:
         self.profile = profile
         self._rng = random.Random(seed)
         self.faults = faults
+        self.latency_s = latency_s
         now = time.monotonic()
         if profile.protocol == "visca":
             self.camera: ViscaCamera | PelcoDCamera = ViscaCamera(profile, address, now, self._rng, faults.buffer_full)
-            self._parser: ViscaParser | PelcoDParser = ViscaParser()
         else:
             self.camera = PelcoDCamera(profile, address, now)
-            self._parser = PelcoDParser(replies=False)
         self.state_file = Path(state_file) if state_file else None
-        self.link = Path(link) if link else None
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)
-        os.set_blocking(self._master, False)
-        self.path = os.ttyname(self._slave)
-        if self.link:
-            tmp = self.link.with_name(f".{self.link.name}.{os.getpid()}.tmp")
-            with contextlib.suppress(FileNotFoundError):
-                tmp.unlink()
-            os.symlink(self.path, tmp)
-            os.replace(tmp, self.link)
         self._last_state: dict | None = None
         self._state_due = 0.0
-        self._write_state(force=True)
+        self._delayed: list[tuple[float, object]] = []
 
-    # -- the loop -------------------------------------------------------------------------
+    def _due(self, items, now: float) -> list:
+        """The received items whose latency has passed, oldest first (``items``, received at ``now``,
+        join the queue first)."""
+        self._delayed += [(now + self.latency_s, it) for it in items]
+        ready = [it for t, it in self._delayed if t <= now]
+        self._delayed = [(t, it) for t, it in self._delayed if t > now]
+        return ready
 
-    def serve(self) -> None:
-        """Serve until :meth:`stop` is called (from another thread or a signal handler)."""
-        try:
-            while not self._stop.is_set():
-                timeout = _TICK_MOVING_S if self.camera.moving else _TICK_IDLE_S
-                ready, _, _ = select.select([self._master], [], [], timeout)
-                now = time.monotonic()
-                replies: list[bytes] = []
-                with self._lock:
-                    if ready:
-                        data = self._read()
-                        for packet in self._parser.feed(data):
-                            replies += self.camera.receive(packet, now)
-                        if isinstance(self._parser, PelcoDParser):
-                            self.camera.errors += self._parser.rejected
-                            self._parser.rejected = 0
-                    replies += self.camera.tick(now)
-                for reply in replies:
-                    self._send(reply)
-                self._write_state()
-        finally:
-            self._write_state(force=True)
+    def _timeout(self) -> float:
+        timeout = _TICK_MOVING_S if self.camera.moving else _TICK_IDLE_S
+        if self._delayed:
+            timeout = min(timeout, max(0.0, min(t for t, _ in self._delayed) - time.monotonic()))
+        return timeout
 
-    def _read(self) -> bytes:
-        try:
-            return os.read(self._master, 4096)
-        except BlockingIOError:
-            return b""
-
-    def _send(self, reply: bytes) -> None:
+    def _mangle(self, reply: bytes, header: int = 0) -> bytes | None:
+        """The reply after the injected faults (``None``: dropped); the first ``header`` bytes are kept."""
         f, rng = self.faults, self._rng
         if f.drop and rng.random() < f.drop:
-            return
-        if f.garble and rng.random() < f.garble:
-            i = rng.randrange(len(reply))
+            return None
+        if f.garble and rng.random() < f.garble and len(reply) > header:
+            i = rng.randrange(header, len(reply))
             reply = reply[:i] + bytes((reply[i] ^ (1 << rng.randrange(8)),)) + reply[i + 1:]
         if f.noise and rng.random() < f.noise:
-            reply = rng.randbytes(rng.randint(1, 8)) + reply
-        self.write(reply)
-
-    def write(self, data: bytes) -> None:
-        """Write to the client without blocking; what does not fit in the pty is dropped."""
-        while data:
-            try:
-                n = os.write(self._master, data)
-            except (BlockingIOError, OSError):
-                return
-            data = data[n:]
-
-    def send_network_change(self) -> None:
-        """VISCA: announce a Network Change (as a camera does when it is power-cycled on the chain)."""
-        with self._lock:
-            self.write(self.camera.network_change())
+            reply = reply[:header] + rng.randbytes(rng.randint(1, 8)) + reply[header:]
+        return reply
 
     def state(self) -> dict:
         with self._lock:
@@ -463,8 +418,6 @@ class PtyEmulator:
         self._last_state = state
         self._state_due = now + _STATE_INTERVAL_S
 
-    # -- lifetime -------------------------------------------------------------------------
-
     def stop(self) -> None:
         """Ask :meth:`serve` to return (safe from a signal handler)."""
         self._stop.set()
@@ -474,18 +427,108 @@ class PtyEmulator:
         """Whether :meth:`stop` was called."""
         return self._stop.is_set()
 
-    def start(self) -> PtyEmulator:
+    def start(self):
         """Serve in a daemon thread."""
         self._thread = threading.Thread(target=self.serve, name="ptz-emulator", daemon=True)
         self._thread.start()
         return self
 
-    def close(self) -> None:
-        """Stop serving, close the pty (the client sees the port vanish) and remove the link."""
+    def _join(self) -> None:
         self.stop()
         if self._thread is not None:
             self._thread.join()
             self._thread = None
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class PtyEmulator(_Emulator):
+    """A camera served on a pseudo-terminal; ``path`` is what a client opens with pyserial.
+
+    ``link`` (optional) is a symlink kept pointing at the pty, so that a client
+    can reopen one path after the emulator was restarted (a new pty). The
+    ``state_file`` (optional) is rewritten atomically (temporary file and
+    rename) at most every 50 ms while something changes. Use :meth:`serve`
+    in the calling thread, or :meth:`start` / :meth:`close` (a context manager)
+    for a background thread.
+    """
+
+    def __init__(self, profile: DeviceProfile, address: int | None = None, *, state_file: str | Path | None = None,
+                 link: str | Path | None = None, faults: Faults = Faults(), seed: int = 0,
+                 latency_s: float = 0.0) -> None:
+        super().__init__(profile, address, state_file=state_file, faults=faults, seed=seed, latency_s=latency_s)
+        self._parser: ViscaParser | PelcoDParser = (ViscaParser() if profile.protocol == "visca"
+                                                    else PelcoDParser(replies=False))
+        self.link = Path(link) if link else None
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        os.set_blocking(self._master, False)
+        self.path = os.ttyname(self._slave)
+        if self.link:
+            tmp = self.link.with_name(f".{self.link.name}.{os.getpid()}.tmp")
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
+            os.symlink(self.path, tmp)
+            os.replace(tmp, self.link)
+        self._write_state(force=True)
+
+    # -- the loop -------------------------------------------------------------------------
+
+    def serve(self) -> None:
+        """Serve until :meth:`stop` is called (from another thread or a signal handler)."""
+        try:
+            while not self._stop.is_set():
+                ready, _, _ = select.select([self._master], [], [], self._timeout())
+                now = time.monotonic()
+                replies: list[bytes] = []
+                with self._lock:
+                    packets = self._parser.feed(self._read()) if ready else []
+                    if isinstance(self._parser, PelcoDParser):
+                        self.camera.errors += self._parser.rejected
+                        self._parser.rejected = 0
+                    for packet in self._due(packets, now):
+                        replies += self.camera.receive(packet, now)
+                    replies += self.camera.tick(now)
+                for reply in replies:
+                    self._send(reply)
+                self._write_state()
+        finally:
+            self._write_state(force=True)
+
+    def _read(self) -> bytes:
+        try:
+            return os.read(self._master, 4096)
+        except BlockingIOError:
+            return b""
+
+    def _send(self, reply: bytes) -> None:
+        reply = self._mangle(reply)
+        if reply is not None:
+            self.write(reply)
+
+    def write(self, data: bytes) -> None:
+        """Write to the client without blocking; what does not fit in the pty is dropped."""
+        while data:
+            try:
+                n = os.write(self._master, data)
+            except (BlockingIOError, OSError):
+                return
+            data = data[n:]
+
+    def send_network_change(self) -> None:
+        """VISCA: announce a Network Change (as a camera does when it is power-cycled on the chain)."""
+        with self._lock:
+            self.write(self.camera.network_change())
+
+    # -- lifetime -------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Stop serving, close the pty (the client sees the port vanish) and remove the link."""
+        self._join()
         for fd in (self._master, self._slave):
             with contextlib.suppress(OSError):
                 os.close(fd)
@@ -494,8 +537,86 @@ class PtyEmulator:
                 if os.readlink(self.link) == self.path:
                     self.link.unlink()
 
-    def __enter__(self) -> PtyEmulator:
-        return self.start()
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+class UdpEmulator(_Emulator):
+    """A VISCA camera served over IP (:mod:`runtime.ptz.visca_ip`) on a UDP socket bound to ``listen``.
+
+    ``address`` is ``(host, port)`` as bound (port 0 picks a free one); ``url`` is what
+    ``omnijax ptz-emulator --protocol visca-ip`` prints (``udp://HOST:PORT``). It answers the
+    last peer that spoke to it. Malformed datagrams are answered with a message error (or
+    ignored, if shorter than a header) and counted; none stops it.
+    """
+
+    def __init__(self, profile: DeviceProfile, listen: tuple[str, int] = ("127.0.0.1", 0), *,
+                 state_file: str | Path | None = None, faults: Faults = Faults(), seed: int = 0,
+                 latency_s: float = 0.0) -> None:
+        from .visca_ip import ViscaIpCamera
+
+        if profile.protocol != "visca":
+            raise ValueError(f"VISCA over IP needs a visca profile, got {profile.protocol}")
+        super().__init__(profile, None, state_file=state_file, faults=faults, seed=seed, latency_s=latency_s)
+        self.ip = ViscaIpCamera(self.camera)
+        self._sock = _socket.socket(_socket.AF_INET6 if ":" in listen[0] else _socket.AF_INET, _socket.SOCK_DGRAM)
+        try:
+            self._sock.bind(listen)
+        except OSError:
+            self._sock.close()
+            raise
+        self._sock.setblocking(False)
+        self.address = self._sock.getsockname()[:2]
+        host = f"[{self.address[0]}]" if ":" in self.address[0] else self.address[0]
+        self.url = f"udp://{host}:{self.address[1]}"
+        self._peer = None
+        self.datagrams = 0
+        self._write_state(force=True)
+
+    def serve(self) -> None:
+        """Serve until :meth:`stop` is called."""
+        try:
+            while not self._stop.is_set():
+                ready, _, _ = select.select([self._sock], [], [], self._timeout())
+                now = time.monotonic()
+                out: list[tuple[bytes, object]] = []
+                with self._lock:
+                    received = self._drain() if ready else []
+                    self.datagrams += len(received)
+                    for data, peer in self._due(received, now):
+                        self._peer = peer
+                        out += [(r, peer) for r in self.ip.receive(data, now)]
+                    if self._peer is not None:
+                        out += [(r, self._peer) for r in self.ip.tick(now)]
+                    else:
+                        self.ip.tick(now)
+                for reply, peer in out:
+                    self._send(reply, peer)
+                self._write_state()
+        finally:
+            self._write_state(force=True)
+
+    def _drain(self) -> list[tuple[bytes, object]]:
+        got = []
+        while len(got) < 256:
+            try:
+                got.append(self._sock.recvfrom(2048))
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:  # an ICMP error from a peer that went away: nothing to read
+                break
+        return got
+
+    def _send(self, reply: bytes, peer) -> None:
+        reply = self._mangle(reply, header=8)
+        if reply is None:
+            return
+        with contextlib.suppress(OSError):
+            self._sock.sendto(reply, peer)
+
+    def state(self) -> dict:
+        with self._lock:
+            return {**self.camera.state(), "errors": self.camera.errors + self.ip.errors,
+                    "datagrams": self.datagrams, "resets": self.ip.resets}
+
+    def close(self) -> None:
+        self._join()
+        with contextlib.suppress(OSError):
+            self._sock.close()
