@@ -78,7 +78,10 @@ def run(args: argparse.Namespace) -> int:
         if not value > 0:
             raise UsageError(f"{flag}: expected a positive number of seconds, got {value}")
 
-    report: dict = {"port": args.ptz, "profile": profile.name, "protocol": profile.protocol}
+    from runtime.ptz.onvif import redact
+
+    shown = redact(args.ptz)  # a password in an onvif:// URL is never printed
+    report: dict = {"port": shown, "profile": profile.name, "protocol": profile.protocol}
     try:
         driver = make_driver(args.ptz, profile)
         driver.connect(timeout=args.timeout)
@@ -97,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
             report["reached"] = reached
         pos = driver.query_position()
     except (PtzError, TimeoutError) as exc:
-        print(f"omnijax ptz: {args.ptz}: {exc or 'no answer'}", file=sys.stderr)
+        print(f"omnijax ptz: {shown}: {exc or 'no answer'}", file=sys.stderr)
         return 1
     finally:
         driver.disconnect()
@@ -112,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
         print(dumps(report))
     else:
         p = report["position"]
-        print(f"{profile.name} on {args.ptz}: pan {p['pan_deg']:.2f} deg, tilt {p['tilt_deg']:.2f} deg, "
+        print(f"{profile.name} on {shown}: pan {p['pan_deg']:.2f} deg, tilt {p['tilt_deg']:.2f} deg, "
               f"zoom {p['zoom']:.2f}x (device: pan {p['device']['pan_deg']:.2f} deg, "
               f"tilt {p['device']['tilt_deg']:.2f} deg, units {pan_u} {tilt_u} {zoom_u})")
         if "target" in report:

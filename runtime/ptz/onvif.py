@@ -94,19 +94,19 @@ class OnvifUrl:
             parts = urlsplit(url)
             port = parts.port
         except ValueError as exc:
-            raise PtzPortError(f"{_redact(url)}: not a usable ONVIF URL: {exc}") from None
-        if parts.scheme.lower() != "onvif" or not parts.hostname:
-            raise PtzPortError(f"{_redact(url)}: expected onvif://[USER:PASSWORD@]HOST[:PORT]")
+            raise PtzPortError(f"{redact(url)}: not a usable ONVIF URL: {exc}") from None
+        if parts.scheme.lower() != "onvif" or not parts.hostname or parts.netloc.endswith(":"):
+            raise PtzPortError(f"{redact(url)}: expected onvif://[USER:PASSWORD@]HOST[:PORT]")
         if parts.path not in ("", "/") or parts.query or parts.fragment:
-            raise PtzPortError(f"{_redact(url)}: expected nothing after HOST[:PORT] (the services are discovered)")
+            raise PtzPortError(f"{redact(url)}: expected nothing after HOST[:PORT] (the services are discovered)")
         user = unquote(parts.username) if parts.username is not None else None
         password = unquote(parts.password) if parts.password is not None else None
         if password is not None and not user:
-            raise PtzPortError(f"{_redact(url)}: a password without a user name")
+            raise PtzPortError(f"{redact(url)}: a password without a user name")
         return cls(parts.hostname, DEFAULT_PORT if port is None else port, user or None, password)
 
 
-def _redact(url: str) -> str:
+def redact(url: str) -> str:
     """``url`` with its password replaced by ``***`` (for messages and logs)."""
     try:
         parts = urlsplit(url)
@@ -193,8 +193,8 @@ class OnvifDriver:
             unauthorised = self._unauthorised
             self.disconnect()
             if unauthorised:
-                raise PtzPortError(f"{_redact(self.port)}: the camera refused the user name or password ({reason})")
-            raise PtzError(f"{_redact(self.port)}: no ONVIF PTZ camera within {timeout:g} s ({reason})")
+                raise PtzPortError(f"{redact(self.port)}: the camera refused the user name or password ({reason})")
+            raise PtzError(f"{redact(self.port)}: no ONVIF PTZ camera within {timeout:g} s ({reason})")
         return self
 
     def disconnect(self) -> None:
@@ -257,7 +257,7 @@ class OnvifDriver:
         fut: Future = Future()
         with self._lock:
             if not self.connected:
-                fut.set_exception(PtzError(f"{_redact(self.port)}: not connected"))
+                fut.set_exception(PtzError(f"{redact(self.port)}: not connected"))
                 return fut
             self._queries.append(fut)
         self._poke()
@@ -331,7 +331,7 @@ class OnvifDriver:
             self.last_error = f"{type(exc).__name__}: {exc}"
         finally:
             self._connected.clear()
-            self._fail_queries(f"{_redact(self.port)}: driver stopped")
+            self._fail_queries(f"{redact(self.port)}: driver stopped")
 
     async def _main(self) -> None:
         self._loop = asyncio.get_running_loop()
@@ -359,15 +359,15 @@ class OnvifDriver:
 
     def _fail(self, reason: str, unauthorised: bool) -> None:
         self.last_error = reason
-        self._unauthorised = unauthorised
+        self._unauthorised = unauthorised or (self._unauthorised and not self._ever_connected)
         if unauthorised:
             self._count("unauthorised")
         first = self._outage_since is None
         if first:
             self._outage_since = time.monotonic()
             self._count("errors")
-        (log.warning if first else log.debug)("PTZ link lost on %s: %s; reconnecting", _redact(self.port), reason)
-        self._fail_queries(f"{_redact(self.port)}: {reason}")
+        (log.warning if first else log.debug)("PTZ link lost on %s: %s; reconnecting", redact(self.port), reason)
+        self._fail_queries(f"{redact(self.port)}: {reason}")
 
     def _fail_queries(self, reason: str) -> None:
         with self._lock:
@@ -468,7 +468,7 @@ class OnvifDriver:
         self._connected.set()
         outage, self._outage_since = self._outage_since, None
         d = self.discovered
-        log.info("PTZ connected on %s (ONVIF, profile %s, %s moves, status: %s)%s", _redact(self.port),
+        log.info("PTZ connected on %s (ONVIF, profile %s, %s moves, status: %s)%s", redact(self.port),
                  d["profile_token"], d["mode"], d["move_status"],
                  "" if outage is None else f" after {time.monotonic() - outage:.2f} s without")
         return cam
@@ -718,11 +718,11 @@ class OnvifDriver:
         try:
             status = await self._status()
         except _LinkLost as exc:
-            fut.set_exception(PtzError(f"{_redact(self.port)}: position inquiry failed ({exc})"))
+            fut.set_exception(PtzError(f"{redact(self.port)}: position inquiry failed ({exc})"))
             raise
         pos = self._position_of(status) if status is not None else None
         if pos is None:
-            fut.set_exception(PtzError(f"{_redact(self.port)}: position inquiry failed (no usable GetStatus)"))
+            fut.set_exception(PtzError(f"{redact(self.port)}: position inquiry failed (no usable GetStatus)"))
             return
         self._set_estimate(pos, time.monotonic())
         fut.set_result(self.profile.from_device(*(round(v) for v in pos)))

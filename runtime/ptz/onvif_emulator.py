@@ -502,6 +502,8 @@ class _Handler(BaseHTTPRequestHandler):
             self.close_connection = True
             return
         data = self.rfile.read(length)
+        if emulator.latency_s:
+            time.sleep(emulator.latency_s)
         status, body = emulator.service.handle(data)
         self._reply(status, body, "application/soap+xml; charset=utf-8")
 
@@ -533,14 +535,16 @@ class OnvifEmulator:
     """An :class:`OnvifCamera` served over HTTP on ``host:port`` (port 0: one the system picks).
 
     ``url`` is the device service address to print; ``state_file`` as the serial emulator's
-    (pan_deg, tilt_deg, zoom, commands, errors, ...). :meth:`serve` in the calling thread
+    (pan_deg, tilt_deg, zoom, commands, errors, ...); ``latency_s`` delays every request before the
+    camera sees it (a camera's command latency). :meth:`serve` in the calling thread
     until :meth:`stop`, or :meth:`start`/:meth:`close` (a context manager) in a thread.
     """
 
     def __init__(self, profile: DeviceProfile, host: str = "127.0.0.1", port: int = 0, *,
                  user: str | None = None, password: str | None = None, quirks: tuple[str, ...] = (),
-                 state_file: str | Path | None = None) -> None:
+                 state_file: str | Path | None = None, latency_s: float = 0.0) -> None:
         self.profile = profile
+        self.latency_s = latency_s
         self.camera = OnvifCamera(profile, time.monotonic(), quirks)
         self._server = _Server((host, port), _Handler)
         self._server.emulator = self
