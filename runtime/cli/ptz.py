@@ -10,7 +10,8 @@ HELP = "send one pan/tilt/zoom to a PTZ camera, or ask where it is"
 DESCRIPTION = """\
 Connect to a PTZ camera, over a pyserial URL (/dev/ttyUSB0, socket://host:port,
 or the path printed by `omnijax ptz-emulator`) or VISCA over IP
-(visca-udp://HOST[:PORT], port 52381 by default), optionally send one target in
+(visca-udp://HOST[:PORT], port 52381 by default) or ONVIF
+(onvif://[USER:PASSWORD@]HOST[:PORT], port 80 by default), optionally send one target in
 omnijax's frame (pan from the direction of the omni camera's axis, tilt up
 positive, degrees; zoom factor) through the device profile's mounting and
 limits, wait until the camera reports it reached it, and print where it is:
@@ -24,7 +25,8 @@ either way, tilt within [-90, 90] deg and zoom positive.
 
 Exit codes: 0 done (and reached, if a target was sent), 1 no camera answered or
 target not reached in time, 2 bad arguments or profile, or a port that cannot
-be opened (a malformed URL, no such device).
+be opened (a malformed URL, no such device, an ONVIF camera refusing the user
+name or password).
 """
 
 
