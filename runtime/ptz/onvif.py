@@ -188,7 +188,7 @@ class OnvifDriver:
         self._stop.clear()
         self._worker = threading.Thread(target=self._thread_main, name="ptz-onvif", daemon=True)
         self._worker.start()
-        if timeout is not None and not self._connected.wait(timeout):
+        if timeout is not None and not self._wait_connected(timeout):
             reason = self.last_error or "no answer"
             unauthorised = self._unauthorised
             self.disconnect()
@@ -196,6 +196,14 @@ class OnvifDriver:
                 raise PtzPortError(f"{redact(self.port)}: the camera refused the user name or password ({reason})")
             raise PtzError(f"{redact(self.port)}: no ONVIF PTZ camera within {timeout:g} s ({reason})")
         return self
+
+    def _wait_connected(self, timeout: float) -> bool:
+        """Wait for the first connection; give up early when the camera refused the credentials."""
+        deadline = time.monotonic() + timeout
+        while not self._connected.wait(min(0.05, max(0.0, deadline - time.monotonic()))):
+            if self._unauthorised or time.monotonic() >= deadline:
+                return False
+        return True
 
     def disconnect(self) -> None:
         """Stop the worker and close the session; pending queries fail with :class:`PtzError`."""

@@ -29,6 +29,7 @@ import datetime as dt
 import json
 import math
 import os
+import socket
 import threading
 import time
 from collections import deque
@@ -487,6 +488,18 @@ class _Handler(BaseHTTPRequestHandler):
     protocol_version = "HTTP/1.1"
     timeout = 5.0  # a client that stalls mid-request loses its connection, not the server
 
+    def setup(self) -> None:
+        super().setup()
+        with self.server.lock:
+            self.server.connections.add(self.connection)
+
+    def finish(self) -> None:
+        try:
+            super().finish()
+        finally:
+            with self.server.lock:
+                self.server.connections.discard(self.connection)
+
     def do_POST(self) -> None:
         emulator: OnvifEmulator = self.server.emulator
         if self.path.split("?")[0] not in ("/onvif/device_service", "/onvif/media_service", "/onvif/ptz_service"):
@@ -525,6 +538,19 @@ class _Server(ThreadingHTTPServer):
     daemon_threads = True
     allow_reuse_address = True
     request_queue_size = 64
+
+    def __init__(self, *args, **kwargs) -> None:
+        self.lock = threading.Lock()
+        self.connections: set[socket.socket] = set()
+        super().__init__(*args, **kwargs)
+
+    def drop_connections(self) -> None:
+        """Close every open (keep-alive) connection: a camera that goes away answers nobody."""
+        with self.lock:
+            conns = list(self.connections)
+        for conn in conns:
+            with contextlib.suppress(OSError):
+                conn.shutdown(socket.SHUT_RDWR)
 
     def handle_error(self, request, client_address) -> None:
         # a client that vanished mid-reply (reset, broken pipe) is not the emulator's problem; count it
@@ -595,6 +621,7 @@ class OnvifEmulator:
             self._server.shutdown()
             http.join()
             self._server.server_close()
+            self._server.drop_connections()
             self._write_state(force=True)
 
     def stop(self) -> None:
