@@ -36,10 +36,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("source", metavar="SOURCE", help="camera index, video file or folder of images")
     p.add_argument("--config", required=True, metavar="FILE", help="rig TOML file")
-    p.add_argument("--ptz", metavar="URL", help="PTZ camera: pyserial URL, visca-udp://HOST[:PORT] or onvif://[USER:PASSWORD@]HOST[:PORT]; "
+    p.add_argument("--ptz", metavar="URL",
+                   help="PTZ camera: pyserial URL, visca-udp://HOST[:PORT] or onvif://[USER:PASSWORD@]HOST[:PORT]; "
                         "none: commands are only logged")
-    add_ptz_profile_option(p, "PTZ device profile: TOML file or a name in configs/devices (default sony_evi_d70; onvif_ptz "
-                              "for onvif://)")
+    add_ptz_profile_option(p, "PTZ device profile: TOML file or a name in configs/devices "
+                              "(default sony_evi_d70; onvif_ptz for onvif://)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
     p.add_argument("--pace", choices=PACES,
                    help="live: frames at the source's rate, late ones dropped; all: every frame as fast as "
@@ -98,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
                               paced=pace == "live", background_frames=args.background_frames,
                               background_step=args.background_step,
                               video=not args.no_video, record=args.record, title=f"OMNI  {Path(str(args.source)).name}",
-                              extra={"config_file": str(args.config), "ptz_url": redact(args.ptz) if args.ptz else None, "pace": pace,
+                              extra={"config_file": str(args.config),
+                                     "ptz_url": redact(args.ptz) if args.ptz else None, "pace": pace,
                                      "faults_injected": plan.describe()})
     except SourceError as exc:
         raise UsageError(str(exc)) from None
