@@ -57,7 +57,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "all: every frame is processed, as fast as possible")
     p.add_argument("--protocol", choices=EMULATED, default="visca", metavar="NAME",
                    help="protocol of the emulated PTZ: %(choices)s (default visca; visca-ip: VISCA over IP, "
-                        "through the UDP stack)")
+                        "through the UDP stack; onvif: ONVIF, SOAP over HTTP on localhost)")
     p.add_argument("--inset-every", type=int, default=8, metavar="K",
                    help="re-render the foveal inset every K frames (default 8; ray casting is slow)")
     p.add_argument("--background-step", type=int, default=8, metavar="K",

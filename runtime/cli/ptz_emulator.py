@@ -68,7 +68,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--address", type=int, metavar="N",
                    help="camera address (VISCA: place on the chain, 1-7; Pelco-D: 1-255); default: the profile's")
     add_ptz_profile_option(p, "device profile: a TOML file or a name in configs/devices "
-                              "(default: sony_evi_d70 for visca, pelco_d_dome for pelco-d)")
+                              "(default: sony_evi_d70 for visca and visca-ip, pelco_d_dome for pelco-d, "
+                              "onvif_ptz for onvif)")
     p.add_argument("--state-file", metavar="F", help="keep F updated with the camera's state (JSON)")
     p.add_argument("--link", metavar="PATH", help="keep a symlink PATH pointing at the pty (pty protocols)")
     p.add_argument("--faults", default="", metavar="SPEC",
