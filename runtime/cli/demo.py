@@ -150,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
     with interrupted_during("during start-up"), EmulatorProcess(args.protocol) as emulator:
         driver = make_driver(emulator.url, profile)
         try:
-            driver.connect(timeout=10)
+            driver.connect(timeout=30)  # ONVIF: the first connect parses the WSDLs (seconds on a busy machine)
         except PtzError as exc:
             raise RuntimeError(f"the PTZ emulator did not answer: {exc}") from None
 

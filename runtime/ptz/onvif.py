@@ -260,6 +260,30 @@ class OnvifDriver:
             self._writes.clear()
         return out
 
+    def capabilities(self):
+        """What this camera offers (a :class:`runtime.ptz.transports.Capabilities`), as discovered at the last
+        connect: its move modes (best first), how the end of a move is known, position read-back."""
+        from .transports import Capabilities
+
+        p = self.profile
+        with self._lock:
+            d = dict(self.discovered)
+            fallbacks = self._counts["timer_fallbacks"]
+        notes = []
+        if d and not d["position"]:
+            notes.append("no position read-back: positions are the driver's estimate")
+        if d and d["move_status"] == "timer":
+            notes.append("no MoveStatus: the end of a move is timed from the profile's slew rates")
+        if fallbacks:
+            notes.append(f"MoveStatus stayed MOVING past the predicted arrival {fallbacks} times: timer used")
+        if d and d["mode"] != "absolute":
+            notes.append(f"no AbsoluteMove: driven by {d['mode']} moves")
+        return Capabilities(
+            protocol="onvif", transport="http", move_modes=tuple(d.get("modes", ())),
+            move_status=d.get("move_status", "timer"), position=bool(d.get("position")),
+            zoom=(float(p.zoom.magnification[0]), float(p.zoom.magnification[-1])),
+            limits_deg={"pan": tuple(p.pan.limits_deg), "tilt": tuple(p.tilt.limits_deg)}, notes=tuple(notes))
+
     def request_position(self) -> Future:
         """Ask the camera where it is (GetStatus; the driver's estimate where the camera reports no position)."""
         fut: Future = Future()

@@ -26,9 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
-import json
 import math
-import os
 import socket
 import threading
 import time
@@ -38,7 +36,7 @@ from pathlib import Path
 
 from lxml import etree
 
-from .emulator import Axis, _Camera
+from .emulator import Axis, Faults, _Camera, _Emulator
 from .onvif_soap import SPACES, TDS, TPTZ, TRT, TT, SoapError, check_username_token, envelope, fault, parse_request
 from .profile import DeviceProfile
 
@@ -48,9 +46,8 @@ PTZ_CONFIG_TOKEN = "ptz_config_1"
 NODE_TOKEN = "ptz_node_1"
 #: How many nonces the camera remembers to refuse replays.
 _NONCES_KEPT = 4096
-#: The emulator's state-file and motion tick (s).
+#: The emulator's state-file tick (s).
 _TICK_S = 0.02
-_STATE_INTERVAL_S = 0.05
 #: Longest and default ContinuousMove time-out (s).
 _MAX_TIMEOUT_S = 60.0
 _DEFAULT_TIMEOUT_S = 5.0
@@ -224,16 +221,17 @@ class OnvifService:
 
     ``base_url`` is what GetServices and GetCapabilities advertise (``http://HOST:PORT``);
     ``user``/``password``: WS-Security UsernameToken required on every operation but
-    GetSystemDateAndTime when a user is set. Counters: ``requests``, ``faults``,
-    ``unauthorised``, ``malformed``.
+    GetSystemDateAndTime when a user is set; ``lock`` (the emulator's) guards the camera.
+    Counters: ``requests``, ``faults``, ``unauthorised``, ``malformed``.
     """
 
     def __init__(self, camera: OnvifCamera, base_url: str, user: str | None = None, password: str | None = None,
-                 clock=time.monotonic, wall_clock=lambda: dt.datetime.now(dt.UTC)) -> None:
+                 clock=time.monotonic, wall_clock=lambda: dt.datetime.now(dt.UTC),
+                 lock: threading.Lock | None = None) -> None:
         self.camera, self.base_url = camera, base_url.rstrip("/")
         self.user, self.password = user, password or ""
         self.clock, self.wall_clock = clock, wall_clock
-        self.lock = threading.Lock()
+        self.lock = lock or threading.Lock()
         self._nonces: set[bytes] = set()
         self._nonce_order: deque[bytes] = deque()
         self.counts = dict.fromkeys(("requests", "faults", "unauthorised", "malformed"), 0)
@@ -557,56 +555,39 @@ class _Server(ThreadingHTTPServer):
         self.emulator.dropped_connections += 1
 
 
-class OnvifEmulator:
+class OnvifEmulator(_Emulator):
     """An :class:`OnvifCamera` served over HTTP on ``host:port`` (port 0: one the system picks).
 
     ``url`` is the device service address to print; ``state_file`` as the serial emulator's
-    (pan_deg, tilt_deg, zoom, commands, errors, ...); ``latency_s`` delays every request before the
-    camera sees it (a camera's command latency). :meth:`serve` in the calling thread
-    until :meth:`stop`, or :meth:`start`/:meth:`close` (a context manager) in a thread.
+    (pan_deg, tilt_deg, zoom, commands, errors, and ``onvif``: the service's counters);
+    ``latency_s`` delays every request before the camera sees it (a camera's command latency).
+    :meth:`serve` in the calling thread until :meth:`stop`, or :meth:`start`/:meth:`close`
+    (a context manager) in a thread.
     """
 
     def __init__(self, profile: DeviceProfile, host: str = "127.0.0.1", port: int = 0, *,
                  user: str | None = None, password: str | None = None, quirks: tuple[str, ...] = (),
                  state_file: str | Path | None = None, latency_s: float = 0.0) -> None:
-        self.profile = profile
-        self.latency_s = latency_s
-        self.camera = OnvifCamera(profile, time.monotonic(), quirks)
+        self._quirks = quirks
+        super().__init__(profile, None, state_file=state_file, faults=Faults(), seed=0, latency_s=latency_s)
         self._server = _Server((host, port), _Handler)
         self._server.emulator = self
         h, p = self._server.server_address[:2]
         self.address = (h, p)
         self.url = f"http://{h}:{p}/onvif/device_service"
-        self.service = OnvifService(self.camera, f"http://{h}:{p}", user, password)
-        self.state_file = Path(state_file) if state_file else None
+        self.service = OnvifService(self.camera, f"http://{h}:{p}", user, password, lock=self._lock)
         self.dropped_connections = 0
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._last_state: dict | None = None
-        self._state_due = 0.0
+
+    def _make_camera(self, profile: DeviceProfile, address: int | None, now: float) -> OnvifCamera:
+        return OnvifCamera(profile, now, self._quirks)
 
     def state(self) -> dict:
-        with self.service.lock:
+        with self._lock:
             self.camera.advance(time.monotonic())
             out = self.camera.state()
             out["commands"] = self.service.counts["requests"]
             out["onvif"] = dict(self.service.counts, quirks=list(self.camera.quirks))
             return out
-
-    def _write_state(self, force: bool = False) -> None:
-        if self.state_file is None:
-            return
-        now = time.monotonic()
-        if not force and now < self._state_due:
-            return
-        state = self.state()
-        if state == self._last_state and not force:
-            return
-        tmp = self.state_file.with_name(f".{self.state_file.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(state))
-        os.replace(tmp, self.state_file)
-        self._last_state = state
-        self._state_due = now + _STATE_INTERVAL_S
 
     def serve(self) -> None:
         """Serve until :meth:`stop` (safe from a signal handler)."""
@@ -624,30 +605,11 @@ class OnvifEmulator:
             self._server.drop_connections()
             self._write_state(force=True)
 
-    def stop(self) -> None:
-        self._stop.set()
-
-    @property
-    def stopped(self) -> bool:
-        return self._stop.is_set()
-
-    def start(self) -> OnvifEmulator:
-        self._thread = threading.Thread(target=self.serve, name="onvif-emulator", daemon=True)
-        self._thread.start()
-        return self
-
     def close(self) -> None:
-        self.stop()
+        """Stop serving: the port closes and open connections are dropped (the camera vanishes)."""
         if self._thread is not None:
-            self._thread.join()
-            self._thread = None
+            self._join()
         else:
+            self.stop()
             with contextlib.suppress(OSError):
                 self._server.server_close()
-
-    def __enter__(self) -> OnvifEmulator:
-        return self.start()
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-

@@ -16,7 +16,7 @@ from runtime.ptz import PtzError, PtzPortError, make_driver
 from runtime.ptz.onvif import OnvifDriver, OnvifUrl, redact
 from runtime.ptz.onvif_emulator import OnvifCamera, OnvifEmulator, OnvifService, parse_quirks
 from runtime.ptz.onvif_soap import PASSWORD_DIGEST, SOAP12, TPTZ, TT, WSSE, WSU, envelope, password_digest
-from runtime.ptz.profile import default_profile
+from runtime.ptz.profile import default_profile, parse_profile
 
 PROFILE = default_profile("onvif")
 
@@ -176,6 +176,26 @@ def test_fuzz_fixed_seed_no_exception_no_hang(caplog):
     r = fuzz_driver(PROFILE, 60, seed=0)
     assert r.exceptions == 0 and r.hangs == 0, r.examples
     assert r.statuses["malformed"] + r.statuses["faults"] > 0
+
+
+def test_the_generic_spaces_span_the_profile_ranges():
+    p = PROFILE
+    assert p.from_normalised("pan", -1) == p.limits_units("pan")[0] and p.from_normalised("pan", 1) == 17000
+    assert p.from_normalised("tilt", -1) == -3000 and p.from_normalised("tilt", 1) == 9000
+    assert p.to_normalised("zoom", p.zoom.position[-1]) == 1.0
+    for axis, units in (("pan", 1234.0), ("tilt", -250.0), ("zoom", 4321.0)):
+        assert p.from_normalised(axis, p.to_normalised(axis, units)) == pytest.approx(units, abs=1e-9)
+    with pytest.raises(ValueError, match="hundredths of a degree"):
+        parse_profile({**p.model_dump(), "pan": {**p.pan.model_dump(), "units_per_deg": 14.4}})
+
+
+def test_capabilities_say_how_a_quirky_camera_is_driven():
+    with OnvifEmulator(PROFILE, quirks=("relative-only", "no-move-status")) as em:
+        with OnvifDriver(f"onvif://127.0.0.1:{em.address[1]}", PROFILE).connect(timeout=20) as d:
+            c = d.capabilities()
+    assert (c.protocol, c.transport, c.move_modes, c.move_status, c.position) == (
+        "onvif", "http", ("relative",), "timer", True)
+    assert any("no AbsoluteMove" in n for n in c.notes)
 
 
 def test_status_vector_names_are_the_schema_ones():
