@@ -48,8 +48,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--zoom", type=finite_float, metavar="Z", help="target zoom factor")
     p.add_argument("--wait", type=finite_float, default=15.0, metavar="S",
                    help="seconds to wait for the camera to reach the target (default 15)")
-    p.add_argument("--timeout", type=finite_float, default=5.0, metavar="S",
-                   help="seconds to wait for the camera to answer when connecting (default 5)")
+    p.add_argument("--timeout", type=finite_float, metavar="S",
+                   help="seconds to wait for the camera to answer when connecting (default 5; 30 for onvif://, "
+                        "whose client first parses the ONVIF WSDLs: seconds on a busy or small machine)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
 
@@ -76,6 +77,8 @@ def run(args: argparse.Namespace) -> int:
                              f"got {args.tilt_deg:g}")
         if not args.zoom > 0:
             raise UsageError(f"--zoom: expected a zoom factor > 0, got {args.zoom:g}")
+    if args.timeout is None:
+        args.timeout = 30.0 if args.ptz.lower().startswith("onvif://") else 5.0
     for flag, value in (("--wait", args.wait), ("--timeout", args.timeout)):
         if not value > 0:
             raise UsageError(f"{flag}: expected a positive number of seconds, got {value}")

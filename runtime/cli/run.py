@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     if args.ptz:
         try:
             driver = make_driver(args.ptz, profile)
-            driver.connect(timeout=5)
+            driver.connect(timeout=30 if args.ptz.lower().startswith("onvif://") else 5)  # ONVIF: WSDLs parsed first
         except PtzError as exc:
             source.close()
             raise UsageError(f"--ptz: {exc}") from None

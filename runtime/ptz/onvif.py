@@ -60,7 +60,8 @@ log = logging.getLogger("omnijax.ptz")
 
 #: Default HTTP port of ``onvif://HOST``.
 DEFAULT_PORT = 80
-#: Continuous moves: velocity = error / (full slew rate * tau), so the error decays with this time constant (s).
+#: Continuous moves: velocity = error / (full slew rate * tau), so the error decays with this time constant (s);
+#: tau grows to twice the measured control period where that is longer (a slow link or a busy machine).
 _CONTINUOUS_TAU_S = 0.15
 #: Continuous moves: the time-out sent with each velocity (s): the camera stops by itself if we vanish.
 _CONTINUOUS_TIMEOUT_S = 1.0
@@ -170,6 +171,8 @@ class OnvifDriver:
         self._moving = False
         self._settled = True
         self._silent = 0
+        self._steered_at = 0.0
+        self._steer_period = 0.0
         self._egress = _EgressClock()
 
     # ------------------------------------------------------------------------------------
@@ -703,7 +706,14 @@ class OnvifDriver:
                 await self._call(self._ptz, "Stop", {"ProfileToken": self._token, "PanTilt": True, "Zoom": True})
             self._velocity, self._moving, self._settled = (0.0, 0.0, 0.0), False, True
             return
-        v = [max(-1.0, min(1.0, e / (self._rate(a) * _CONTINUOUS_TAU_S))) for a, e in zip(_AXES, err)]
+        # the camera keeps the velocity until the next command: cover at most half the error per control period
+        # (measured), so that the loop stays stable however slow the link or the machine is
+        now = time.monotonic()
+        if 0 < now - self._steered_at < 2.0:
+            self._steer_period = 0.7 * self._steer_period + 0.3 * (now - self._steered_at)
+        self._steered_at = now
+        tau = max(_CONTINUOUS_TAU_S, 2.0 * self._steer_period)
+        v = [max(-1.0, min(1.0, e / (self._rate(a) * tau))) for a, e in zip(_AXES, err)]
         params = {"ProfileToken": self._token, "Velocity": {"PanTilt": {"x": v[0], "y": v[1]}, "Zoom": {"x": v[2]}},
                   "Timeout": f"PT{_CONTINUOUS_TIMEOUT_S:g}S"}
         self._count("moves")
