@@ -1,6 +1,8 @@
-"""Reading frames (OpenCV) as RGB uint8 arrays: one reader of video files, one of image folders, one of cameras.
+"""Reading frames (OpenCV) as RGB uint8 arrays: video files, image folders, cameras, network streams.
 
-:class:`VideoSource`, :class:`FolderSource` and :class:`DeviceSource` are the readers;
+:class:`VideoSource`, :class:`FolderSource`, :class:`DeviceSource` and :class:`NetworkSource`
+(``rtsp://``, ``http://`` MJPEG, through OpenCV's FFmpeg, reconnecting when the stream drops)
+are the readers;
 the real-time loop runs them as they are, a broken frame yielded as ``None`` and
 reading going on (:func:`open_source`). :func:`read_frames` is the strict use of the
 same readers for offline commands: an unreadable image or a change of frame size is
@@ -11,6 +13,8 @@ from __future__ import annotations
 
 import abc
 import itertools
+import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -128,8 +132,109 @@ class DeviceSource(Source):
         self._cap.release()
 
 
+#: URL schemes read as network streams (OpenCV's FFmpeg back-end).
+NETWORK_SCHEMES = ("rtsp", "rtsps", "http", "https", "rtmp", "udp", "tcp")
+
+
+class NetworkSource(Source):
+    """A network stream (``rtsp://``, ``http://`` MJPEG, ...) read through OpenCV's FFmpeg back-end.
+
+    When the stream drops (a read fails or times out), the source yields ``None`` (one broken
+    frame), then reopens it with exponential back-off (``backoff_s``: first and longest delay)
+    and goes on, counting ``reconnects`` and the ``outage_s`` spent without frames; the stream
+    ends only after ``give_up_s`` without a frame, or on :meth:`close`. Frames are stamped with
+    the capture clock (``live``). The first open failing is a :class:`SourceError`.
+    """
+
+    def __init__(self, url: str, open_timeout_s: float = 5.0, read_timeout_s: float = 2.0,
+                 backoff_s: tuple[float, float] = (0.1, 2.0), give_up_s: float = 60.0):
+        self.url, self.name, self.live = url, url, True
+        self.open_timeout_s, self.read_timeout_s = open_timeout_s, read_timeout_s
+        self.backoff_s, self.give_up_s = backoff_s, give_up_s
+        self.counters = {"reconnects": 0, "drops": 0, "failed_opens": 0, "outage_s": 0.0}
+        self._closed = threading.Event()
+        self._reading = False
+        self._cap = self._open()
+        if self._cap is None:
+            raise SourceError(f"{_redact(url)}: cannot open the stream (no answer, or not a video OpenCV can "
+                              f"read, within {open_timeout_s:g} s)")
+        fps = self._cap.get(cv2.CAP_PROP_FPS)
+        self.fps = fps if fps and np.isfinite(fps) and 0 < fps <= 1000 else None
+
+    def _open(self):
+        cap = cv2.VideoCapture(self.url, cv2.CAP_FFMPEG,
+                               [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, int(1e3 * self.open_timeout_s),
+                                cv2.CAP_PROP_READ_TIMEOUT_MSEC, int(1e3 * self.read_timeout_s)])
+        if cap.isOpened():
+            return cap
+        cap.release()
+        return None
+
+    def frames(self):
+        self._reading = True
+        try:
+            while not self._closed.is_set():
+                ok, img = self._cap.read() if self._cap is not None else (False, None)
+                if ok and img is not None:
+                    yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+                    continue
+                if self._closed.is_set():
+                    return
+                self.counters["drops"] += 1
+                yield None
+                if not self._reconnect():
+                    return
+        finally:
+            self._reading = False
+            if self._cap is not None:
+                self._cap.release()
+                self._cap = None
+
+    def _reconnect(self) -> bool:
+        """Reopen the stream with back-off; ``False`` after ``give_up_s`` or on :meth:`close`."""
+        if self._cap is not None:
+            self._cap.release()
+            self._cap = None
+        t0 = time.monotonic()
+        delay = self.backoff_s[0]
+        try:
+            while not self._closed.wait(delay):
+                self._cap = self._open()
+                if self._cap is not None:
+                    self.counters["reconnects"] += 1
+                    return True
+                self.counters["failed_opens"] += 1
+                if time.monotonic() - t0 > self.give_up_s:
+                    return False
+                delay = min(2 * delay, self.backoff_s[1])
+            return False
+        finally:
+            self.counters["outage_s"] += time.monotonic() - t0
+
+    def close(self):
+        """Stop reading; the capture is released here, or by the reading thread when it notices."""
+        self._closed.set()
+        if not self._reading and self._cap is not None:
+            self._cap.release()
+            self._cap = None
+
+
+def _redact(url: str) -> str:
+    """``url`` without a password (``rtsp://user:secret@host`` -> ``rtsp://user:***@host``)."""
+    from urllib.parse import urlsplit, urlunsplit
+
+    parts = urlsplit(url)
+    if parts.password is None:
+        return url
+    netloc = parts.netloc.replace(f":{parts.password}@", ":***@", 1)
+    return urlunsplit(parts._replace(netloc=netloc))
+
+
 def open_source(spec: str, fps: float | None = None) -> Source:
-    """A source from a command-line spec: a video file, an image folder, or a camera index."""
+    """A source from a command-line spec: a video file, an image folder, a camera index, or a network
+    stream URL (``rtsp://``, ``http://``, ...)."""
+    if spec.split("://", 1)[0].lower() in NETWORK_SCHEMES and "://" in spec:
+        return NetworkSource(spec)
     if spec.isdigit():
         return DeviceSource(int(spec))
     path = Path(spec)
@@ -137,7 +242,8 @@ def open_source(spec: str, fps: float | None = None) -> Source:
         return FolderSource(path, fps)
     if path.exists():
         return VideoSource(path)
-    raise SourceError(f"{spec}: no such video file, image folder or camera index")
+    raise SourceError(f"{spec}: no such video file, image folder, camera index or stream URL "
+                      f"({', '.join(s + '://' for s in NETWORK_SCHEMES)})")
 
 
 def read_frames(source: str | Path, limit: int | None = None) -> Iterator[np.ndarray]:

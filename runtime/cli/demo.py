@@ -11,10 +11,11 @@ HELP = "run the whole system on a synthetic scenario with an emulated PTZ and sc
 DESCRIPTION = """\
 Renders a synthetic scenario (people walking in a lit room, seen by the rig's omni
 camera) frame by frame as a live camera would deliver them, starts the PTZ
-emulator on a pseudo-terminal, and runs the real-time loop on it: detection,
-tracking, target choice, the head predicted to when the PTZ gets there, pan/tilt/
-zoom with the propagated uncertainty, and the commands written through the real
-VISCA (or Pelco-D) driver to the emulator.
+emulator on a pseudo-terminal (--protocol visca, pelco-d) or on a UDP port of
+127.0.0.1 (--protocol visca-ip: VISCA over IP, through the network stack), and
+runs the real-time loop on it: detection, tracking, target choice, the head
+predicted to when the PTZ gets there, pan/tilt/zoom with the propagated
+uncertainty, and the commands written through the real driver to the emulator.
 
 Every processed frame is scored against the world's ground truth: detection
 misses and false alarms, the foot position error on the floor, and for each

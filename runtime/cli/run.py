@@ -1,4 +1,5 @@
-"""``omnijax run``: the real-time loop on a camera, a video file or an image folder, steering a PTZ."""
+"""``omnijax run``: the real-time loop on a camera, a network stream, a video file or an image folder,
+steering a PTZ."""
 
 from __future__ import annotations
 
@@ -6,10 +7,15 @@ import argparse
 import sys
 from pathlib import Path
 
-HELP = "track people with the omni camera (device, video or image folder) and steer the PTZ onto their heads"
+HELP = ("track people with the omni camera (device, stream, video or image folder) and steer the PTZ onto "
+        "their heads")
 DESCRIPTION = """\
-SOURCE is a camera index (0, 1, ...), a video file or a folder of images. A capture
-thread keeps only the newest frame (late frames are dropped and counted). The
+SOURCE is a camera index (0, 1, ...), a network stream (rtsp://..., http://... MJPEG,
+read through OpenCV's FFmpeg; when it drops, it is reopened with back-off, 0.1 s
+doubling to 2 s, for up to 60 s, and the reconnects are counted in summary.json
+stream {reconnects, drops, failed_opens, outage_s}), a video file or a folder of
+images. A capture thread keeps only the newest frame (late frames are dropped and
+counted). The
 background is learnt from the first frames; then, per frame: detection (jitted),
 tracking (Kalman with optimal assignment, or the paper's nearest neighbour), the
 target (round-robin with a dwell time, people whose face was not yet captured
@@ -34,7 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("run", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("source", metavar="SOURCE", help="camera index, video file or folder of images")
+    p.add_argument("source", metavar="SOURCE", help="camera index, stream URL, video file or folder of images")
     p.add_argument("--config", required=True, metavar="FILE", help="rig TOML file")
     p.add_argument("--ptz", metavar="URL",
                    help="PTZ camera: pyserial URL, visca-udp://HOST[:PORT] or onvif://[USER:PASSWORD@]HOST[:PORT]; "
@@ -111,5 +117,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"{summary['frames']} frames at {summary['fps']:.1f} fps ({summary['stop_reason']}); latency p50 "
           f"{lat['p50'] or float('nan'):.2f} ms, p99 {lat['p99'] or float('nan'):.2f} ms; "
           f"PTZ {p['commands']} commands, "
-          f"{p['errors']} errors, {p['reconnects']} reconnects; wrote {args.out}", file=sys.stdout)
+          f"{p['errors']} errors, {p['reconnects']} reconnects; "
+          + (f"stream {summary['stream']['reconnects']} reconnects; " if "stream" in summary else "")
+          + f"wrote {args.out}", file=sys.stdout)
     return 0

@@ -320,7 +320,8 @@ class PtzDriver:
     def _open(self) -> bool:
         try:
             port = transports.open_port(self.port, baudrate=self.profile.baudrate, timeout=_READ_TIMEOUT_S,
-                                        write_timeout=_WRITE_TIMEOUT_S, link=self._link, counters=self._transport)
+                                        write_timeout=_WRITE_TIMEOUT_S, link=self._link, counters=self._transport,
+                                        address=self.profile.address)
             port.reset_input_buffer()
         except (serial.SerialException, OSError, ValueError) as exc:
             self.last_error = f"cannot open: {exc}"

@@ -136,7 +136,8 @@ class OnvifDriver:
     """Steers one ONVIF PTZ camera; see the module docstring. Thread-safe; ``set_target`` never blocks."""
 
     def __init__(self, port: str, profile: DeviceProfile) -> None:
-        self.port = port
+        self._raw_url = port
+        self.port = redact(port)  # what messages show: never the password
         self.profile = profile
         self._link = profile.link
         self._url: OnvifUrl | None = None
@@ -187,7 +188,7 @@ class OnvifDriver:
         """
         if self._worker is not None:
             return self
-        self._url = OnvifUrl.parse(self.port)
+        self._url = OnvifUrl.parse(self._raw_url)
         self._stop.clear()
         self._worker = threading.Thread(target=self._thread_main, name="ptz-onvif", daemon=True)
         self._worker.start()
@@ -196,8 +197,8 @@ class OnvifDriver:
             unauthorised = self._unauthorised
             self.disconnect()
             if unauthorised:
-                raise PtzPortError(f"{redact(self.port)}: the camera refused the user name or password ({reason})")
-            raise PtzError(f"{redact(self.port)}: no ONVIF PTZ camera within {timeout:g} s ({reason})")
+                raise PtzPortError(f"{self.port}: the camera refused the user name or password ({reason})")
+            raise PtzError(f"{self.port}: no ONVIF PTZ camera within {timeout:g} s ({reason})")
         return self
 
     def _wait_connected(self, timeout: float) -> bool:
@@ -292,7 +293,7 @@ class OnvifDriver:
         fut: Future = Future()
         with self._lock:
             if not self.connected:
-                fut.set_exception(PtzError(f"{redact(self.port)}: not connected"))
+                fut.set_exception(PtzError(f"{self.port}: not connected"))
                 return fut
             self._queries.append(fut)
         self._poke()
@@ -366,7 +367,7 @@ class OnvifDriver:
             self.last_error = f"{type(exc).__name__}: {exc}"
         finally:
             self._connected.clear()
-            self._fail_queries(f"{redact(self.port)}: driver stopped")
+            self._fail_queries(f"{self.port}: driver stopped")
 
     async def _main(self) -> None:
         self._loop = asyncio.get_running_loop()
@@ -401,8 +402,8 @@ class OnvifDriver:
         if first:
             self._outage_since = time.monotonic()
             self._count("errors")
-        (log.warning if first else log.debug)("PTZ link lost on %s: %s; reconnecting", redact(self.port), reason)
-        self._fail_queries(f"{redact(self.port)}: {reason}")
+        (log.warning if first else log.debug)("PTZ link lost on %s: %s; reconnecting", self.port, reason)
+        self._fail_queries(f"{self.port}: {reason}")
 
     def _fail_queries(self, reason: str) -> None:
         with self._lock:
@@ -503,7 +504,7 @@ class OnvifDriver:
         self._connected.set()
         outage, self._outage_since = self._outage_since, None
         d = self.discovered
-        log.info("PTZ connected on %s (ONVIF, profile %s, %s moves, status: %s)%s", redact(self.port),
+        log.info("PTZ connected on %s (ONVIF, profile %s, %s moves, status: %s)%s", self.port,
                  d["profile_token"], d["mode"], d["move_status"],
                  "" if outage is None else f" after {time.monotonic() - outage:.2f} s without")
         return cam
@@ -760,11 +761,11 @@ class OnvifDriver:
         try:
             status = await self._status()
         except _LinkLost as exc:
-            fut.set_exception(PtzError(f"{redact(self.port)}: position inquiry failed ({exc})"))
+            fut.set_exception(PtzError(f"{self.port}: position inquiry failed ({exc})"))
             raise
         pos = self._position_of(status) if status is not None else None
         if pos is None:
-            fut.set_exception(PtzError(f"{redact(self.port)}: position inquiry failed (no usable GetStatus)"))
+            fut.set_exception(PtzError(f"{self.port}: position inquiry failed (no usable GetStatus)"))
             return
         self._set_estimate(pos, time.monotonic())
         fut.set_result(self.profile.from_device(*(round(v) for v in pos)))

@@ -120,6 +120,8 @@ class LinkSection(Section):
     retry_delay_s: Seconds = 0.05
     reconnect_backoff_s: Annotated[list[Seconds], Len(2, 2)] = [0.05, 0.5]
     max_silent: Annotated[int, Field(ge=1)] = 3
+    command_latency_s: Annotated[float, Field(ge=0, le=60)] = Field(
+        0.0, description="from a command's bytes on the wire to the motion starting (omnijax ptz calibrate)")
 
     @model_validator(mode="after")
     def _check(self):

@@ -124,13 +124,15 @@ def check_port(url: str) -> None:
         raise PtzPortError(f"{url}: no such serial device")
 
 
-def open_port(url: str, *, baudrate: int, timeout: float, write_timeout: float, link, counters: dict):
+def open_port(url: str, *, baudrate: int, timeout: float, write_timeout: float, link, counters: dict,
+              address: int = 1):
     """Open the byte stream behind ``url``: a pyserial port, or a port-like transport (``read``,
     ``write``, ``in_waiting``, ``reset_input_buffer``, ``close``) that counts its events in ``counters``.
+    ``address`` is the camera's (a transport that asks the camera itself, e.g. a keep-alive, uses it).
     Raises ``OSError``/``ValueError``/``serial.SerialException`` when it cannot be opened."""
     scheme = scheme_for(url)
     if scheme.port_factory is not None:
-        return _load(scheme.port_factory).open(url, timeout=timeout, link=link, counters=counters)
+        return _load(scheme.port_factory).open(url, timeout=timeout, link=link, counters=counters, address=address)
     import serial
 
     return serial.serial_for_url(url, baudrate=baudrate, timeout=timeout, write_timeout=write_timeout)

@@ -20,8 +20,9 @@ completion both carry the command's).
   ``read`` the VISCA replies) over a connected UDP socket: RESET when it opens, a fresh
   sequence number per packet, retries of an unanswered packet (same sequence number, so
   the camera does not execute it twice), replies accepted only when their sequence number
-  is one it sent, and a RESET again after a sequence error (the unanswered packets are
-  then sent again under new numbers).
+  is one it sent, a RESET again after a sequence error (the unanswered packets are
+  then sent again under new numbers), and a keep-alive inquiry after :data:`KEEPALIVE_S`
+  of silence (its answer is kept by the port; none, after the retries, is a lost link).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from dataclasses import dataclass
 from urllib.parse import urlsplit
 
 from .errors import PtzPortError
-from .visca import ViscaParser
+from .visca import ViscaParser, pan_tilt_position_inquiry
 
 DEFAULT_PORT = 52381
 HEADER = struct.Struct(">HHI")
@@ -52,6 +53,10 @@ _SEQS_KEPT = 256
 #: Retries of an unanswered packet, and the wait before each, as a fraction of the link's ACK time-out.
 RETRIES = 2
 _RETRY_FRACTION = 0.3
+#: After this long (s) without a datagram from the camera, the port asks its position itself (and keeps
+#: the answer): UDP has no connection, so an idle driver would not notice a camera gone until its next
+#: command. An unanswered keep-alive (after its retries) is a lost link.
+KEEPALIVE_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -193,12 +198,14 @@ class ViscaIpPort:
     """
 
     def __init__(self, host: str, port: int, *, timeout: float, ack_timeout_s: float,
-                 counters: dict | None = None) -> None:
+                 counters: dict | None = None, camera: int = 1) -> None:
         self.address = (host, port)
+        self.camera = camera
         self.timeout = timeout
         self._retry_s = max(0.02, _RETRY_FRACTION * ack_timeout_s)
         self.counters = counters if counters is not None else {}
-        for key in ("retries", "sequence_errors", "message_errors", "resets", "stale_replies", "malformed_datagrams"):
+        for key in ("retries", "sequence_errors", "message_errors", "resets", "stale_replies", "malformed_datagrams",
+                    "keepalives"):
             self.counters.setdefault(key, 0)
         self._lock = threading.Lock()
         self._buffer = bytearray()
@@ -206,6 +213,9 @@ class ViscaIpPort:
         self._mine: OrderedDict[int, None] = OrderedDict()
         self._seq = 0
         self._closed = False
+        self._keepalive: int | None = None
+        self._dead: str | None = None
+        self._heard = time.monotonic()
         self._sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self._sock.connect(self.address)
@@ -222,9 +232,9 @@ class ViscaIpPort:
         parse_url(url)
 
     @classmethod
-    def open(cls, url: str, *, timeout: float, link, counters: dict) -> ViscaIpPort:
+    def open(cls, url: str, *, timeout: float, link, counters: dict, address: int = 1) -> ViscaIpPort:
         host, port = parse_url(url)
-        return cls(host, port, timeout=timeout, ack_timeout_s=link.ack_timeout_s, counters=counters)
+        return cls(host, port, timeout=timeout, ack_timeout_s=link.ack_timeout_s, counters=counters, camera=address)
 
     @property
     def in_waiting(self) -> int:
@@ -250,6 +260,8 @@ class ViscaIpPort:
         """Up to ``size`` bytes of VISCA replies; waits at most ``timeout`` s for a datagram."""
         if not self._buffer:
             self._retry_due()
+            if self._dead:
+                raise OSError(self._dead)
             try:
                 data = self._sock.recv(2048)
             except TimeoutError:
@@ -305,6 +317,7 @@ class ViscaIpPort:
     def _take(self, data: bytes) -> None:
         d = unframe(data)
         with self._lock:
+            self._heard = time.monotonic()
             if d is None or d.payload_type not in (REPLY, CONTROL_REPLY):
                 self.counters["malformed_datagrams"] += 1
                 return
@@ -322,6 +335,9 @@ class ViscaIpPort:
                 self.counters["stale_replies"] += 1
                 return
             self._outstanding.pop(d.seq, None)
+            if d.seq == self._keepalive:
+                self._keepalive = None
+                return
             self._buffer += d.payload
 
     def _resequence(self) -> None:
@@ -329,6 +345,8 @@ class ViscaIpPort:
         self._sock.send(frame(CONTROL, 0, RESET))
         self.counters["resets"] += 1
         self._seq = 0
+        self._outstanding.pop(self._keepalive, None)
+        self._keepalive = None
         pending, self._outstanding = list(self._outstanding.values()), OrderedDict()
         now = time.monotonic()
         for o in pending:
@@ -344,11 +362,21 @@ class ViscaIpPort:
         :data:`RETRIES` (the driver's ACK time-out then counts it)."""
         now = time.monotonic()
         with self._lock:
+            if self._keepalive is None and now - self._heard > KEEPALIVE_S and not self._outstanding:
+                self._keepalive = self._next_seq()
+                datagram = frame(INQUIRY, self._keepalive, pan_tilt_position_inquiry(self.camera))
+                self._outstanding[self._keepalive] = _Outstanding(datagram, now)
+                self._remember(self._keepalive)
+                self.counters["keepalives"] += 1
+                self._sock.send(datagram)
             for seq, o in list(self._outstanding.items()):
                 if now - o.sent_at < self._retry_s:
                     continue
                 if o.tries > RETRIES:
                     del self._outstanding[seq]
+                    if seq == self._keepalive:
+                        self._dead = (f"no answer from {self.address[0]}:{self.address[1]} to a keep-alive inquiry "
+                                      f"after {1 + RETRIES} tries")
                     continue
                 o.tries += 1
                 o.sent_at = now

@@ -287,8 +287,8 @@ class RealTimeLoop:
         return time.monotonic() >= self._arrive_at
 
     def _slew_time(self, target: tuple[float, float, float], zoom: bool = True) -> float:
-        """Seconds the PTZ needs from the last command to ``target`` (device slew rates, and the zoom
-        speed unless ``zoom`` is false)."""
+        """Seconds the PTZ needs from the last command to ``target``: the device profile's command latency,
+        then its slew rates (and the zoom speed unless ``zoom`` is false)."""
         if self.profile is None or self.sent is None:
             return 0.0
         d_pan = abs(math.degrees(wrap_pi(target[0] - self.sent[0])))
@@ -296,8 +296,9 @@ class RealTimeLoop:
         zp = self.profile.zoom
         z_span = max(zp.position) - min(zp.position)
         d_zoom = abs(self.profile.zoom_position(target[2]) - self.profile.zoom_position(self.sent[2])) / z_span
-        return max(d_pan / self.profile.pan.slew_deg_s(), d_tilt / self.profile.tilt.slew_deg_s(),
-                   d_zoom * zp.seconds_full_range if zoom else 0.0)
+        return self.profile.link.command_latency_s + max(
+            d_pan / self.profile.pan.slew_deg_s(), d_tilt / self.profile.tilt.slew_deg_s(),
+            d_zoom * zp.seconds_full_range if zoom else 0.0)
 
     def _aim(self, frame: Frame, tracks) -> Command | None:
         target = self.selector.choose(frame.stamp, tracks, self._settled())

@@ -200,11 +200,23 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
                         "outputs": {"log": "log.jsonl", **({"video": writer.name} if writer else {}),
                                     **({"record": recorder.name} if recorder else {}),
                                     **({"view": view.name} if view.is_file() else {})}})
+        video_counters = _source_counters(source)  # a network stream: reconnects, drops, outage
+        if video_counters is not None:
+            summary["stream"] = video_counters
         summary.update(extra or {})
         if finish is not None:
             finish(summary)
         (stage / "summary.json").write_text(dumps(summary) + "\n")
     return summary
+
+
+def _source_counters(source) -> dict | None:
+    """A network source's ``counters`` (reconnects, drops, ...), through any wrapper."""
+    while source is not None:
+        if isinstance(getattr(source, "counters", None), dict):
+            return dict(source.counters)
+        source = getattr(source, "source", None)
+    return None
 
 
 def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: LoopConfig, paced: bool, n_bg: int,

@@ -215,3 +215,22 @@ def test_cli_bad_input_is_one_line_and_exit_2(argv, message, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
+
+
+def test_an_idle_driver_notices_a_silent_camera_by_its_keep_alive():
+    """UDP has no connection: with nothing to send, the port's keep-alive inquiry finds the camera gone."""
+    profile = quick_profile("visca", ack_timeout_s=0.2)
+    emu = UdpEmulator(profile).start()
+    ptz = make_driver(_url(emu), profile).connect(10)
+    try:
+        ptz.set_target(*_rad(10.0, 0.0, 2.0))
+        assert ptz.wait_reached(timeout=20)
+        assert wait_for(lambda: ptz.stats()["transport"]["keepalives"] >= 1, timeout=20)
+        assert ptz.stats()["unsolicited"] == 0  # the port keeps the keep-alive's answers
+        emu.faults = Faults(drop=1.0)  # the camera stops answering (no ICMP either, as when its cable is pulled)
+        t0 = time.monotonic()
+        assert wait_for(lambda: not ptz.connected, timeout=20)
+        assert time.monotonic() - t0 < 10  # not the 10 s completion time-out
+    finally:
+        ptz.disconnect()
+        emu.close()

@@ -156,3 +156,37 @@ def test_run_on_a_video_with_the_emulator_stops_cleanly_on_sigterm(demo_out, tmp
     assert s["ptz"]["commands"] > 0 and s["ptz_homed"]
     assert state["pan_deg"] == 0 and state["tilt_deg"] == 0 and state["zoom"] == 1
     assert len((out / "log.jsonl").read_text().splitlines()) == s["frames"]
+
+
+def test_run_on_a_network_stream_reconnects_and_steers_a_visca_ip_ptz(demo_out, tmp_path):
+    """``omnijax run http://...`` on the demo's recorded omni frames served as MJPEG over HTTP
+    (127.0.0.1, a port the OS picks), steering a VISCA over IP emulator; the stream is dropped
+    for 0.5 s part-way: one reconnect counted, the loop goes on, SIGTERM ends it cleanly."""
+    from runtime.frames import read_frames
+    from runtime.ptz import UdpEmulator, default_profile
+    from tests.runtime.mjpeg import MjpegServer
+
+    images = list(read_frames(demo_out / "omni.avi"))
+    out = tmp_path / "run"
+    with MjpegServer(fps=25, images=images) as stream, UdpEmulator(default_profile("visca")) as emulator:
+        proc = omnijax("run", stream.url, "--config", PAPER, "--ptz", f"visca-udp://127.0.0.1:{emulator.address[1]}",
+                       "--out", str(out), "--no-video", "--quiet", "--background-frames", "30")
+        deadline = time.monotonic() + 300
+        dropped = False
+        while time.monotonic() < deadline and proc.poll() is None:
+            logs = list(tmp_path.glob(".run.partial-*/log.jsonl"))
+            n = len(logs[0].read_text().splitlines()) if logs else 0
+            if n >= 30 and not dropped:
+                stream.drop(0.5)
+                dropped = True
+            if n >= 120:
+                proc.send_signal(signal.SIGTERM)
+                break
+            time.sleep(0.05)
+        _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 0, stderr[-2000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["stop_reason"] == "SIGTERM" and s["frames"] >= 100
+    assert s["stream"]["reconnects"] == 1 and s["stream"]["drops"] == 1
+    assert s["faults"]["broken_frames"] >= 1
+    assert s["ptz"]["commands"] > 0 and s["ptz"]["errors"] == 0
