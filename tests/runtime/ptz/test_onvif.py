@@ -201,3 +201,33 @@ def test_capabilities_say_how_a_quirky_camera_is_driven():
 def test_status_vector_names_are_the_schema_ones():
     # the driver reads tt:PanTilt/tt:Zoom in tt:Position; keep the emulator's namespaces the ONVIF ones
     assert TT == "http://www.onvif.org/ver10/schema" and TPTZ == "http://www.onvif.org/ver20/ptz/wsdl"
+
+
+@pytest.mark.parametrize("args, expect", [
+    (["--quirks", "fire"], "--quirks: unknown quirk 'fire'"),
+    (["--user", "admin"], "--user, --password: give both"),
+    (["--quirks", "relative-only,continuous-only"], "exclude each other"),
+    (["--faults", "drop=0.1"], "use --quirks"),
+    (["--listen", "127.0.0.1"], "--listen: expected HOST:PORT"),
+])
+def test_emulator_command_bad_input_is_one_line_exit_2(args, expect, capsys):
+    from runtime.cli._main import main
+
+    assert main(["ptz-emulator", "--protocol", "onvif", *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and expect in err[0]
+
+
+def test_ptz_command_wrong_password_is_one_line_exit_2_and_never_shows_it(capsys, caplog):
+    from runtime.cli._main import main
+
+    caplog.set_level(logging.CRITICAL)
+    with OnvifEmulator(PROFILE, user="admin", password="s3cret") as em:
+        url = f"onvif://admin:hunter2@127.0.0.1:{em.address[1]}"
+        assert main(["ptz", "--ptz", url, "--timeout", "20"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "refused the user name or password" in err[0] and "hunter2" not in err[0]
+        url = f"onvif://admin:s3cret@127.0.0.1:{em.address[1]}"
+        assert main(["ptz", "--ptz", url, "--pan-deg", "10", "--tilt-deg", "5", "--zoom", "2", "--json"]) == 0
+        out = capsys.readouterr().out
+        assert '"reached": true' in out and "s3cret" not in out and "admin:***@" in out
