@@ -74,7 +74,12 @@ def round_trips(n_targets: int) -> dict:
                 print(f"round trips {name}: {reached}/{n_targets} reached", flush=True)
             finally:
                 em.terminate()
-                em.wait(10)
+                try:
+                    em.wait(60)
+                except subprocess.TimeoutExpired:
+                    em.kill()
+                    em.wait()
+                    out.setdefault(name, {})["emulator_exit"] = "killed: no exit within 60 s of SIGTERM"
     # a wrong password: one line, exit 2
     with OnvifEmulator(profile, user="admin", password="s3cret") as em:
         r = subprocess.run([*cli, "ptz", "--ptz", f"onvif://admin:wrong@127.0.0.1:{em.address[1]}"],
