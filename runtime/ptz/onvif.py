@@ -620,6 +620,10 @@ class OnvifDriver:
                 await self._sleep(poll)
                 continue
             await self._sleep(next_send - now if fresh else _IDLE_S)
+        if any(self._velocity):  # leaving mid continuous move: stop the camera now, not at the move's time-out
+            self._count("moves")
+            await self._call(self._ptz, "Stop", {"ProfileToken": self._token, "PanTilt": True, "Zoom": True})
+            self._velocity = (0.0, 0.0, 0.0)
 
     def _estimate_now(self, now: float) -> list[float]:
         """Where the camera should be by now: the last known position moved toward the goal at the
