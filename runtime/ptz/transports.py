@@ -38,8 +38,9 @@ SCHEMES: dict[str, Scheme] = {
 }
 SERIAL = Scheme("runtime.ptz.driver:PtzDriver", None)
 
-#: ``--protocol`` of ``ptz-emulator`` and ``demo`` -> (profile protocol, what the emulator prints: a pty
-#: path, ``udp://...``). The driver URL of an emulator is :func:`emulator_url`.
+#: ``--protocol`` of ``ptz-emulator`` and ``demo`` -> the device-profile protocol of the emulated camera.
+#: The emulator prints a pty path, ``udp://HOST:PORT`` or ``http://HOST:PORT/onvif/device_service``; the
+#: driver's URL for it is :func:`emulator_url`.
 EMULATED: dict[str, str] = {"visca": "visca", "pelco-d": "pelco-d", "visca-ip": "visca", "onvif": "onvif"}
 #: The emulated cameras reached over the network (``--listen``), not on a pty.
 NETWORK_EMULATED = ("visca-ip", "onvif")

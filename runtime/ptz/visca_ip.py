@@ -358,8 +358,9 @@ class ViscaIpPort:
             self._sock.send(datagram)
 
     def _retry_due(self) -> None:
-        """Send again (same number) what is unanswered after the retry interval; give up after
-        :data:`RETRIES` (the driver's ACK time-out then counts it)."""
+        """Send again (same number) the newest packet if unanswered after the retry interval; give up after
+        :data:`RETRIES` (the driver's ACK time-out then counts it). An older unanswered packet is not sent
+        again: a number below one already sent is a sequence error to the camera."""
         now = time.monotonic()
         with self._lock:
             if self._keepalive is None and now - self._heard > KEEPALIVE_S and not self._outstanding:
@@ -369,8 +370,14 @@ class ViscaIpPort:
                 self._remember(self._keepalive)
                 self.counters["keepalives"] += 1
                 self._sock.send(datagram)
+            newest = next(reversed(self._outstanding), None)
             for seq, o in list(self._outstanding.items()):
                 if now - o.sent_at < self._retry_s:
+                    continue
+                if seq != newest:  # a later number went out: the camera would take a retry for a sequence error
+                    del self._outstanding[seq]
+                    if seq == self._keepalive:
+                        self._keepalive = None
                     continue
                 if o.tries > RETRIES:
                     del self._outstanding[seq]

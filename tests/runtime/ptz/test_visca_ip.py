@@ -234,3 +234,22 @@ def test_an_idle_driver_notices_a_silent_camera_by_its_keep_alive():
     finally:
         ptz.disconnect()
         emu.close()
+
+
+def test_only_the_newest_unanswered_packet_is_sent_again():
+    """A retry under a number below one already sent would be a sequence error at the camera."""
+    from tests.runtime.ptz.fuzz_ip import _ResetAnswerer
+
+    answerer = _ResetAnswerer()  # answers RESET only: every other packet stays unanswered
+    port = vip.ViscaIpPort("127.0.0.1", answerer.port, timeout=0.01, ack_timeout_s=0.1)
+    try:
+        port.write(visca.zoom_position_inquiry(1))
+        port.write(visca.pan_tilt_position_inquiry(1))
+        first, second = list(port._outstanding)
+        time.sleep(0.05)
+        port._retry_due()
+        assert list(port._outstanding) == [second] and port.counters["retries"] == 1
+        assert port._outstanding[second].tries == 2 and first not in port._outstanding
+    finally:
+        port.close()
+        answerer.close()
