@@ -60,7 +60,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "all: every frame is processed, as fast as possible")
     p.add_argument("--protocol", choices=EMULATED, default="visca", metavar="NAME",
                    help="protocol of the emulated PTZ: %(choices)s (default visca; visca-ip: VISCA over IP, "
-                        "through the UDP stack)")
+                        "through the UDP stack; onvif: ONVIF, SOAP over HTTP on localhost)")
     p.add_argument("--inset-every", type=int, default=8, metavar="K",
                    help="re-render the foveal inset every K frames (default 8; ray casting is slow)")
     p.add_argument("--background-step", type=int, default=8, metavar="K",
@@ -153,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     with interrupted_during("during start-up"), EmulatorProcess(args.protocol) as emulator:
         driver = make_driver(emulator.url, profile)
         try:
-            driver.connect(timeout=10)
+            driver.connect(timeout=30)  # ONVIF: the first connect parses the WSDLs (seconds on a busy machine)
         except PtzError as exc:
             raise RuntimeError(f"the PTZ emulator did not answer: {exc}") from None
 

@@ -10,7 +10,8 @@ HELP = "send one pan/tilt/zoom to a PTZ camera, or ask where it is"
 DESCRIPTION = """\
 Connect to a PTZ camera, over a pyserial URL (/dev/ttyUSB0, socket://host:port,
 or the path printed by `omnijax ptz-emulator`) or VISCA over IP
-(visca-udp://HOST[:PORT], port 52381 by default), optionally send one target in
+(visca-udp://HOST[:PORT], port 52381 by default) or ONVIF
+(onvif://[USER:PASSWORD@]HOST[:PORT], port 80 by default), optionally send one target in
 omnijax's frame (pan from the direction of the omni camera's axis, tilt up
 positive, degrees; zoom factor) through the device profile's mounting and
 limits, wait until the camera reports it reached it, and print where it is:
@@ -24,7 +25,8 @@ either way, tilt within [-90, 90] deg and zoom positive.
 
 Exit codes: 0 done (and reached, if a target was sent), 1 no camera answered or
 target not reached in time, 2 bad arguments or profile, or a port that cannot
-be opened (a malformed URL, no such device).
+be opened (a malformed URL, no such device, an ONVIF camera refusing the user
+name or password).
 
 Two actions for installers (see their --help):
   omnijax ptz probe --ptz URL [--json]       what the camera offers, and a verdict
@@ -64,8 +66,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("ptz", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     deprecated_alias(p, "--port", p.add_argument("--ptz", metavar="URL",
-                                                   help="the camera: a pyserial URL of its serial line, or "
-                                                        "visca-udp://HOST[:PORT] (required)"))
+                                                   help="the camera: a pyserial URL of its serial line, "
+                                                        "visca-udp://HOST[:PORT] or "
+                                                        "onvif://[USER:PASSWORD@]HOST[:PORT] (required)"))
     add_ptz_profile_option(p, "device profile: a TOML file or a name in configs/devices (default: per --protocol)")
     p.add_argument("--protocol", choices=PROTOCOLS, metavar="NAME",
                    help="%(choices)s: the shipped profile to use when --ptz-profile is not given (default visca); "
@@ -75,8 +78,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--zoom", type=finite_float, metavar="Z", help="target zoom factor")
     p.add_argument("--wait", type=finite_float, default=15.0, metavar="S",
                    help="seconds to wait for the camera to reach the target (default 15)")
-    p.add_argument("--timeout", type=finite_float, default=5.0, metavar="S",
-                   help="seconds to wait for the camera to answer when connecting (default 5)")
+    p.add_argument("--timeout", type=finite_float, metavar="S",
+                   help="seconds to wait for the camera to answer when connecting (default 5; 30 for onvif://, "
+                        "whose client first parses the ONVIF WSDLs: seconds on a busy or small machine)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
     actions = p.add_subparsers(dest="action", metavar="ACTION", title="actions (optional)")
@@ -85,13 +89,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     cal = actions.add_parser("calibrate", help=CALIBRATE_HELP, description=CALIBRATE_DESCRIPTION,
                              formatter_class=argparse.RawDescriptionHelpFormatter)
     for q in (probe, cal):
-        q.add_argument("--ptz", metavar="URL", help="the camera: a pyserial URL, or visca-udp://HOST[:PORT] (required)")
+        q.add_argument("--ptz", metavar="URL", help="the camera: a pyserial URL, visca-udp://HOST[:PORT] or "
+                                                    "onvif://[USER:PASSWORD@]HOST[:PORT] (required)")
         add_ptz_profile_option(q, "device profile: a TOML file or a name in configs/devices (default: per --protocol)",
                                alias=False)
         q.add_argument("--protocol", choices=PROTOCOLS, metavar="NAME",
                        help="%(choices)s: the shipped profile to use when --ptz-profile is not given")
-        q.add_argument("--timeout", type=finite_float, default=5.0, metavar="S",
-                       help="seconds to wait for the camera to answer when connecting (default 5)")
+        q.add_argument("--timeout", type=finite_float, metavar="S",
+                       help="seconds to wait for the camera to answer when connecting (default 5; 30 for onvif://)")
         q.add_argument("--json", action="store_true", help="print one JSON object")
     probe.add_argument("--step-deg", type=finite_float, default=1.0, metavar="DEG",
                        help="pan of the test move, device degrees (default 1)")
@@ -101,6 +106,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     cal.add_argument("--span", type=finite_float, default=0.8, metavar="F",
                      help="fraction of each axis's range a move covers (default 0.8)")
     cal.set_defaults(func=run_calibrate)
+
+
+def redact(url: str) -> str:
+    """``url`` as it may be printed: an ``onvif://`` password replaced by ``***``."""
+    from runtime.ptz.onvif import redact as _redact
+
+    return _redact(url)
+
+
+def connect_timeout(url: str) -> float:
+    """Default seconds to wait for a camera's first answer: 30 for ONVIF (its client parses the ONVIF
+    WSDLs first, seconds on a busy or small machine), 5 otherwise."""
+    return 30.0 if url.lower().startswith("onvif://") else 5.0
 
 
 def _connect(args):
@@ -113,6 +131,8 @@ def _connect(args):
 
     if args.ptz is None:
         raise UsageError("--ptz: expected the camera's URL (/dev/ttyUSB0, socket://host:port, visca-udp://host, ...)")
+    if args.timeout is None:
+        args.timeout = connect_timeout(args.ptz)
     if not args.timeout > 0:
         raise UsageError(f"--timeout: expected a positive number of seconds, got {args.timeout}")
     profile = load_ptz_profile(args.ptz_profile, args.protocol or required_protocol(args.ptz))
@@ -141,8 +161,8 @@ def run_probe(args: argparse.Namespace) -> int:
         report = probe(driver, step_deg=args.step_deg)
     finally:
         driver.disconnect()
-    report = {"port": args.ptz, "profile": driver.profile.name, **report}
-    print(dumps(report) if args.json else probe_table(report, args.ptz))
+    report = {"port": redact(args.ptz), "profile": driver.profile.name, **report}
+    print(dumps(report) if args.json else probe_table(report, redact(args.ptz)))
     return 0 if report["verdict"]["drivable"] else 1
 
 
@@ -166,24 +186,24 @@ def run_calibrate(args: argparse.Namespace) -> int:
     try:
         fitted = calibrate(driver, moves=args.moves, span=args.span)
     except (PtzError, TimeoutError, ValueError) as exc:
-        print(f"omnijax ptz calibrate: {args.ptz}: {exc or 'no answer'}", file=sys.stderr)
+        print(f"omnijax ptz calibrate: {redact(args.ptz)}: {exc or 'no answer'}", file=sys.stderr)
         return 1
     finally:
         driver.disconnect()
     profile = driver.profile
     source = resolve_profile_path(args.ptz_profile or DEFAULT_PROFILES[profile.protocol])
-    header = (f"Calibrated by `omnijax ptz calibrate --ptz {args.ptz}` from {source.name}: "
+    header = (f"Calibrated by `omnijax ptz calibrate --ptz {redact(args.ptz)}` from {source.name}: "
               f"{args.moves} timed moves per axis over {args.span:g} of its range.")
     text = calibrated_profile_text(source.read_text(), fitted["profile"], header)
     parse_profile(tomllib.loads(text), source=str(out))  # what is written must load
     tmp = out.with_name(f".{out.name}.tmp")
     tmp.write_text(text)
     tmp.replace(out)
-    report = {"port": args.ptz, "profile": profile.name, "out": str(out), **fitted}
+    report = {"port": redact(args.ptz), "profile": profile.name, "out": str(out), **fitted}
     if args.json:
         print(dumps(report))
     else:
-        print(f"{profile.name} on {args.ptz}: command latency {1e3 * fitted['command_latency_s']:.1f} ms")
+        print(f"{profile.name} on {redact(args.ptz)}: command latency {1e3 * fitted['command_latency_s']:.1f} ms")
         for axis, unit in (("pan", "deg/s"), ("tilt", "deg/s"), ("zoom", "positions/s")):
             f = fitted[axis]
             print(f"  {axis:4s} {f['speed']:9.2f} {unit} at the sent speed code (moves: "
@@ -216,11 +236,14 @@ def run(args: argparse.Namespace) -> int:
                              f"got {args.tilt_deg:g}")
         if not args.zoom > 0:
             raise UsageError(f"--zoom: expected a zoom factor > 0, got {args.zoom:g}")
+    if args.timeout is None:
+        args.timeout = connect_timeout(args.ptz)
     for flag, value in (("--wait", args.wait), ("--timeout", args.timeout)):
         if not value > 0:
             raise UsageError(f"{flag}: expected a positive number of seconds, got {value}")
 
-    report: dict = {"port": args.ptz, "profile": profile.name, "protocol": profile.protocol}
+    shown = redact(args.ptz)  # a password in an onvif:// URL is never printed
+    report: dict = {"port": shown, "profile": profile.name, "protocol": profile.protocol}
     try:
         driver = make_driver(args.ptz, profile)
         driver.connect(timeout=args.timeout)
@@ -239,7 +262,7 @@ def run(args: argparse.Namespace) -> int:
             report["reached"] = reached
         pos = driver.query_position()
     except (PtzError, TimeoutError) as exc:
-        print(f"omnijax ptz: {args.ptz}: {exc or 'no answer'}", file=sys.stderr)
+        print(f"omnijax ptz: {shown}: {exc or 'no answer'}", file=sys.stderr)
         return 1
     finally:
         driver.disconnect()
@@ -254,7 +277,7 @@ def run(args: argparse.Namespace) -> int:
         print(dumps(report))
     else:
         p = report["position"]
-        print(f"{profile.name} on {args.ptz}: pan {p['pan_deg']:.2f} deg, tilt {p['tilt_deg']:.2f} deg, "
+        print(f"{profile.name} on {shown}: pan {p['pan_deg']:.2f} deg, tilt {p['tilt_deg']:.2f} deg, "
               f"zoom {p['zoom']:.2f}x (device: pan {p['device']['pan_deg']:.2f} deg, "
               f"tilt {p['device']['tilt_deg']:.2f} deg, units {pan_u} {tilt_u} {zoom_u})")
         if "target" in report:

@@ -24,8 +24,9 @@ pan/tilt/zoom with the propagated uncertainty (tracking and latency included),
 and the command written to the PTZ unless it is inside the dead zone.
 
 --ptz is a pyserial URL (/dev/ttyUSB0, socket://host:port, or the path printed by
-`omnijax ptz-emulator`) or visca-udp://HOST[:PORT] (VISCA over IP, port 52381 by
-default); without it commands are computed and logged only.
+`omnijax ptz-emulator`), visca-udp://HOST[:PORT] (VISCA over IP) or
+onvif://[USER:PASSWORD@]HOST[:PORT] (ONVIF; the password is never printed or
+logged); without it commands are computed and logged only.
 Ctrl-C or SIGTERM: the PTZ goes home, the summary is written, nothing is lost.
 
 Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line per frame)
@@ -41,9 +42,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("source", metavar="SOURCE", help="camera index, stream URL, video file or folder of images")
     p.add_argument("--config", required=True, metavar="FILE", help="rig TOML file")
-    p.add_argument("--ptz", metavar="URL", help="the PTZ: a pyserial URL or visca-udp://HOST[:PORT]; none: commands "
-                                                "are only logged")
-    add_ptz_profile_option(p, "PTZ device profile: TOML file or a name in configs/devices (default sony_evi_d70)")
+    p.add_argument("--ptz", metavar="URL",
+                   help="PTZ camera: pyserial URL, visca-udp://HOST[:PORT] or onvif://[USER:PASSWORD@]HOST[:PORT]; "
+                        "none: commands are only logged")
+    add_ptz_profile_option(p, "PTZ device profile: TOML file or a name in configs/devices "
+                              "(default sony_evi_d70; onvif_ptz for onvif://)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
     p.add_argument("--pace", choices=PACES,
                    help="live: frames at the source's rate, late ones dropped; all: every frame as fast as "
@@ -78,7 +81,10 @@ def run(args: argparse.Namespace) -> int:
     from runtime.realtime.sources import FaultySource
 
     rig = load_rig(args.config)
-    profile = load_ptz_profile(args.ptz_profile)
+    from runtime.ptz.onvif import redact
+    from runtime.ptz.transports import required_protocol
+
+    profile = load_ptz_profile(args.ptz_profile, required_protocol(args.ptz) if args.ptz else None)
     try:
         source = open_source(args.source, args.fps)
     except SourceError as exc:
@@ -90,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     if args.ptz:
         try:
             driver = make_driver(args.ptz, profile)
-            driver.connect(timeout=5)
+            driver.connect(timeout=30 if args.ptz.lower().startswith("onvif://") else 5)  # ONVIF: WSDLs parsed first
         except PtzError as exc:
             source.close()
             raise UsageError(f"--ptz: {exc}") from None
@@ -99,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
                               paced=pace == "live", background_frames=args.background_frames,
                               background_step=args.background_step,
                               video=not args.no_video, record=args.record, title=f"OMNI  {Path(str(args.source)).name}",
-                              extra={"config_file": str(args.config), "ptz_url": args.ptz, "pace": pace,
+                              extra={"config_file": str(args.config),
+                                     "ptz_url": redact(args.ptz) if args.ptz else None, "pace": pace,
                                      "faults_injected": plan.describe()})
     except SourceError as exc:
         raise UsageError(str(exc)) from None

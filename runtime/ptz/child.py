@@ -21,6 +21,7 @@ import sys
 import tempfile
 import threading
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from runtime.realtime.session import read_state
 
@@ -37,7 +38,9 @@ class EmulatorProcess:
         self.link = self.folder / "ptz"
         self.state_file = self.folder / "ptz-state.json"
         self.protocol, self.profile = protocol, profile
-        self.network = protocol == "visca-ip"
+        from runtime.ptz.transports import NETWORK_EMULATED
+
+        self.network = protocol in NETWORK_EMULATED
         self.listen = "127.0.0.1:0"
         self.proc: subprocess.Popen | None = None
         self.unplugs = 0
@@ -60,7 +63,7 @@ class EmulatorProcess:
             raise RuntimeError(f"the PTZ emulator did not start (exit code {self.proc.poll()})")
         self.pty = line
         if self.network:  # a restart binds the same port, as a camera keeps its address
-            self.listen = line.removeprefix("udp://")
+            self.listen = urlsplit(line).netloc
         return self
 
     @property

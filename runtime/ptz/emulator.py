@@ -348,7 +348,7 @@ class PelcoDCamera(_Camera):
 
 
 class _Emulator:
-    """What the pty and UDP emulators share: the camera, injected faults, the state file, the lifetime.
+    """What the pty, UDP and ONVIF emulators share: the camera, injected faults, the state file, the lifetime.
 
     ``latency_s`` delays every packet received before the camera sees it (a camera's
     command latency, for ``omnijax ptz calibrate`` to measure).
@@ -360,11 +360,7 @@ class _Emulator:
         self._rng = random.Random(seed)
         self.faults = faults
         self.latency_s = latency_s
-        now = time.monotonic()
-        if profile.protocol == "visca":
-            self.camera: ViscaCamera | PelcoDCamera = ViscaCamera(profile, address, now, self._rng, faults.buffer_full)
-        else:
-            self.camera = PelcoDCamera(profile, address, now)
+        self.camera = self._make_camera(profile, address, time.monotonic())
         self.state_file = Path(state_file) if state_file else None
         self._stop = threading.Event()
         self._lock = threading.Lock()
@@ -372,6 +368,11 @@ class _Emulator:
         self._last_state: dict | None = None
         self._state_due = 0.0
         self._delayed: list[tuple[float, object]] = []
+
+    def _make_camera(self, profile: DeviceProfile, address: int | None, now: float) -> _Camera:
+        if profile.protocol == "visca":
+            return ViscaCamera(profile, address, now, self._rng, self.faults.buffer_full)
+        return PelcoDCamera(profile, address, now)
 
     def _due(self, items, now: float) -> list:
         """The received items whose latency has passed, oldest first (``items``, received at ``now``,

@@ -29,15 +29,19 @@ from runtime.files import read_toml
 
 #: Where the shipped profiles live (``configs/devices`` of the checkout).
 DEVICES_DIR = Path(__file__).resolve().parents[2] / "configs" / "devices"
-#: The serial protocols a profile can name (``--protocol``).
-Protocol = Literal["visca", "pelco-d"]
+#: The protocols a profile can name (``--protocol``).
+Protocol = Literal["visca", "pelco-d", "onvif"]
 PROTOCOLS: tuple[str, ...] = get_args(Protocol)
 #: The profile each protocol uses when none is given.
-DEFAULT_PROFILES = {"visca": "sony_evi_d70", "pelco-d": "pelco_d_dome"}
+DEFAULT_PROFILES = {"visca": "sony_evi_d70", "pelco-d": "pelco_d_dome", "onvif": "onvif_ptz"}
 #: Largest magnitude of a VISCA pan/tilt position (signed 16-bit nibbles) and of any zoom position.
 _VISCA_MAX_ANGLE_UNITS = 0x7FFF
 _MAX_ZOOM_POSITION = 0xFFFF
 _PELCO_UNITS_PER_DEG = 100.0
+#: ONVIF profiles count pan and tilt in hundredths of a degree, and the zoom in ten-thousandths of
+#: the generic zoom space [0, 1] (so the emulator's slew model works in integers as for the others).
+_ONVIF_UNITS_PER_DEG = 100.0
+ONVIF_ZOOM_UNITS = 10_000
 
 
 class ProfileError(ValueError):
@@ -189,6 +193,14 @@ class DeviceProfile(Section):
                                      f"<= 127, got {sec.speed}, {sec.max_speed}")
                 if max(abs(v) for v in sec.limits_deg) * sec.units_per_deg > _VISCA_MAX_ANGLE_UNITS:
                     raise ValueError(f"{axis}.limits_deg: beyond VISCA's signed 16-bit position")
+        elif self.protocol == "onvif":
+            for axis in ("pan", "tilt"):
+                if getattr(self, axis).units_per_deg != _ONVIF_UNITS_PER_DEG:
+                    raise ValueError(f"{axis}.units_per_deg: ONVIF profiles count hundredths of a degree, "
+                                     f"expected 100, got {getattr(self, axis).units_per_deg}")
+            if self.zoom.position[-1] > ONVIF_ZOOM_UNITS:
+                raise ValueError(f"zoom.position: ONVIF positions are the generic zoom space [0, 1] times "
+                                 f"{ONVIF_ZOOM_UNITS}, got {self.zoom.position[-1]}")
         else:
             for axis in ("pan", "tilt"):
                 if getattr(self, axis).units_per_deg != _PELCO_UNITS_PER_DEG:
@@ -268,6 +280,33 @@ class DeviceProfile(Section):
         sec = getattr(self, axis)
         return round(sec.limits_deg[0] * sec.units_per_deg), round(sec.limits_deg[1] * sec.units_per_deg)
 
+    # ONVIF's generic spaces: pan and tilt x in [-1, 1] span the device's range linearly, zoom x in [0, 1]
+    # spans the lens (ONVIF_ZOOM_UNITS units). Relative moves use the same scale (a full sweep is 2).
+
+    def to_normalised(self, axis: Literal["pan", "tilt", "zoom"], units: float) -> float:
+        """Device units of ``axis`` -> ONVIF generic position space (pan/tilt [-1, 1], zoom [0, 1])."""
+        if axis == "zoom":
+            return units / ONVIF_ZOOM_UNITS
+        sec = getattr(self, axis)
+        lo, hi = sec.limits_deg
+        return (units / sec.units_per_deg - 0.5 * (lo + hi)) / (0.5 * (hi - lo))
+
+    def from_normalised(self, axis: Literal["pan", "tilt", "zoom"], x: float) -> float:
+        """ONVIF generic position ``x`` of ``axis`` -> device units (not rounded, not clamped)."""
+        if axis == "zoom":
+            return x * ONVIF_ZOOM_UNITS
+        sec = getattr(self, axis)
+        lo, hi = sec.limits_deg
+        return (0.5 * (lo + hi) + x * 0.5 * (hi - lo)) * sec.units_per_deg
+
+    def normalised_scale(self, axis: Literal["pan", "tilt", "zoom"]) -> float:
+        """Device units per unit of ONVIF generic translation (and of full-speed velocity per second
+        divided by the slew rate): the half range of pan/tilt, the whole lens for zoom."""
+        if axis == "zoom":
+            return float(ONVIF_ZOOM_UNITS)
+        sec = getattr(self, axis)
+        return 0.5 * (sec.limits_deg[1] - sec.limits_deg[0]) * sec.units_per_deg
+
     def slew_units_s(self, axis: Literal["pan", "tilt"], speed: int | None = None) -> float:
         """Slew rate of ``axis`` in device units per second (at VISCA speed code ``speed``)."""
         sec = getattr(self, axis)
@@ -294,5 +333,5 @@ def load_profile(name_or_path: str | Path) -> DeviceProfile:
 
 
 def default_profile(protocol: str) -> DeviceProfile:
-    """The shipped profile for ``protocol`` (``visca`` or ``pelco-d``)."""
+    """The shipped profile for ``protocol`` (``visca``, ``pelco-d`` or ``onvif``)."""
     return load_profile(DEFAULT_PROFILES[protocol])

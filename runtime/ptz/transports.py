@@ -2,6 +2,8 @@
 
 - ``visca-udp://HOST[:PORT]`` (port 52381 by default): VISCA over IP
   (:class:`runtime.ptz.visca_ip.ViscaIpPort`) under :class:`~runtime.ptz.driver.PtzDriver`;
+- ``onvif://[USER:PASSWORD@]HOST[:PORT]`` (port 80 by default): :class:`runtime.ptz.onvif.OnvifDriver`
+  (SOAP over HTTP through ``onvif-zeep-async``);
 - anything else: a pyserial URL or device path (``/dev/ttyUSB0``, ``socket://host:port``,
   ``loop://``, a pseudo-terminal from ``omnijax ptz-emulator``) under the same driver.
 
@@ -32,12 +34,16 @@ class Scheme:
 #: URL scheme -> driver. Serial URLs (no scheme, or a pyserial one) fall through to :data:`SERIAL`.
 SCHEMES: dict[str, Scheme] = {
     "visca-udp": Scheme("runtime.ptz.driver:PtzDriver", "visca", "runtime.ptz.visca_ip:ViscaIpPort"),
+    "onvif": Scheme("runtime.ptz.onvif:OnvifDriver", "onvif"),
 }
 SERIAL = Scheme("runtime.ptz.driver:PtzDriver", None)
 
 #: ``--protocol`` of ``ptz-emulator`` and ``demo`` -> the device-profile protocol of the emulated camera.
-#: The emulator prints a pty path or ``udp://HOST:PORT``; the driver's URL for it is :func:`emulator_url`.
-EMULATED: dict[str, str] = {"visca": "visca", "pelco-d": "pelco-d", "visca-ip": "visca"}
+#: The emulator prints a pty path, ``udp://HOST:PORT`` or ``http://HOST:PORT/onvif/device_service``; the
+#: driver's URL for it is :func:`emulator_url`.
+EMULATED: dict[str, str] = {"visca": "visca", "pelco-d": "pelco-d", "visca-ip": "visca", "onvif": "onvif"}
+#: The emulated cameras reached over the network (``--listen``), not on a pty.
+NETWORK_EMULATED = ("visca-ip", "onvif")
 
 
 @dataclass(frozen=True)
@@ -142,4 +148,6 @@ def emulator_url(protocol: str, printed: str) -> str:
     """The ``--ptz`` URL for an emulator of ``protocol`` that printed ``printed`` as its address."""
     if protocol == "visca-ip":
         return "visca-udp://" + printed.removeprefix("udp://")
+    if protocol == "onvif":
+        return "onvif://" + urlsplit(printed).netloc
     return printed

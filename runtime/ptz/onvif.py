@@ -1,0 +1,776 @@
+"""The ONVIF PTZ driver: steer an IP camera over ONVIF (SOAP over HTTP) from the real-time loop.
+
+Use::
+
+    with OnvifDriver("onvif://admin:secret@192.168.1.20", load_profile("onvif_ptz")) as ptz:
+        ptz.set_target(pan, tilt, zoom)      # every frame; returns at once
+        print(ptz.counters)                  # {"commands", "errors", "reconnects"}
+
+The same interface and rules as :class:`runtime.ptz.driver.PtzDriver` (latest target wins,
+nothing queues up, one worker owns the link, reconnect with exponential back-off, counters),
+over the ONVIF client library ``onvif-zeep-async`` (docs/ptz.md says why that one). The
+worker runs its own asyncio loop in a thread; ``set_target`` only stores the target.
+
+On connect (and every reconnect) the worker discovers the camera: GetServices (else
+GetCapabilities) for the service addresses, media GetProfiles for the first profile with a
+PTZ configuration (its ``token``), PTZ GetConfigurationOptions for the move modes it offers,
+and GetStatus for whether it reports its position and its move status. Then each new target
+is sent with
+
+- ``AbsoluteMove`` where the camera offers it;
+- else ``RelativeMove``: the translation from the camera's position (a fresh GetStatus, or
+  the driver's estimate where the camera reports none), corrected once the move has ended;
+- else ``ContinuousMove``: a velocity proportional to the remaining error (time constant
+  :data:`_CONTINUOUS_TAU_S`), polled and steered until within a unit, then ``Stop``;
+  the time-out sent with each velocity stops the camera if this driver vanishes.
+
+The move status comes from GetStatus' MoveStatus; where a camera reports none, or never
+says IDLE, a timer from the profile's slew rates (plus ``link.retry_delay_s`` of margin, and
+never beyond ``link.completion_timeout_s``) says when the move is over (counted as
+``timer_fallbacks``). The generic spaces map to device units through the profile
+(:meth:`DeviceProfile.to_normalised`): pan and tilt x in [-1, 1] span the limits, zoom
+x in [0, 1] spans the lens table.
+
+Failures never escape the worker: a SOAP fault to a move is counted (``faults``, ``errors``)
+and the target is sent again only when it changes; a malformed reply is counted
+(``malformed``); ``link.max_silent`` failed requests in a row, or a refused connection,
+close the session and reconnect (discovering the camera again). A wrong user name or
+password is reported by :meth:`connect` as :class:`PtzPortError` (bad input), and while
+running is counted (``unauthorised``) and retried with back-off.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import threading
+import time
+from collections import deque
+from concurrent.futures import Future
+from dataclasses import dataclass
+from urllib.parse import unquote, urlsplit
+
+import numpy as np
+
+from .driver import PtzError, PtzPortError
+from .profile import DeviceProfile, DeviceTarget, PtzPosition
+
+log = logging.getLogger("omnijax.ptz")
+
+#: Default HTTP port of ``onvif://HOST``.
+DEFAULT_PORT = 80
+#: Continuous moves: velocity = error / (full slew rate * tau), so the error decays with this time constant (s);
+#: tau grows to twice the measured control period where that is longer (a slow link or a busy machine).
+_CONTINUOUS_TAU_S = 0.15
+#: Continuous moves: the time-out sent with each velocity (s): the camera stops by itself if we vanish.
+_CONTINUOUS_TIMEOUT_S = 1.0
+#: A move's status is polled at this interval (s) at most (``link.retry_delay_s`` when larger).
+_IDLE_S = 0.1
+_LATENCIES_KEPT = 10_000
+_AXES = ("pan", "tilt", "zoom")
+
+
+class _LinkLost(Exception):
+    """Internal: the camera cannot be reached or refused us; reconnect."""
+
+
+class _Unauthorised(_LinkLost):
+    """Internal: the camera refused the credentials."""
+
+
+@dataclass
+class OnvifUrl:
+    """``onvif://[USER:PASSWORD@]HOST[:PORT]`` taken apart."""
+
+    host: str
+    port: int
+    user: str | None
+    password: str | None
+
+    @classmethod
+    def parse(cls, url: str) -> OnvifUrl:
+        """One-line :class:`PtzPortError` for a malformed URL."""
+        try:
+            parts = urlsplit(url)
+            port = parts.port
+        except ValueError as exc:
+            raise PtzPortError(f"{redact(url)}: not a usable ONVIF URL: {exc}") from None
+        if parts.scheme.lower() != "onvif" or not parts.hostname or parts.netloc.endswith(":"):
+            raise PtzPortError(f"{redact(url)}: expected onvif://[USER:PASSWORD@]HOST[:PORT]")
+        if parts.path not in ("", "/") or parts.query or parts.fragment:
+            raise PtzPortError(f"{redact(url)}: expected nothing after HOST[:PORT] (the services are discovered)")
+        user = unquote(parts.username) if parts.username is not None else None
+        password = unquote(parts.password) if parts.password is not None else None
+        if password is not None and not user:
+            raise PtzPortError(f"{redact(url)}: a password without a user name")
+        return cls(parts.hostname, DEFAULT_PORT if port is None else port, user or None, password)
+
+
+def redact(url: str) -> str:
+    """``url`` with its password replaced by ``***`` (for messages and logs)."""
+    try:
+        parts = urlsplit(url)
+        if parts.password is None:
+            return url
+        return url.replace(f":{parts.password}@", ":***@", 1)
+    except ValueError:
+        return url.split("@")[-1] if "@" in url else url
+
+
+class _EgressClock:
+    """A zeep plugin noting when each request leaves the SOAP layer for the HTTP transport."""
+
+    def __init__(self) -> None:
+        self.at = 0.0
+
+    def egress(self, envelope, http_headers, operation, binding_options):
+        self.at = time.monotonic()
+        return envelope, http_headers
+
+    def ingress(self, envelope, http_headers, operation):
+        return envelope, http_headers
+
+
+class OnvifDriver:
+    """Steers one ONVIF PTZ camera; see the module docstring. Thread-safe; ``set_target`` never blocks."""
+
+    def __init__(self, port: str, profile: DeviceProfile) -> None:
+        self._raw_url = port
+        self.port = redact(port)  # what messages show: never the password
+        self.profile = profile
+        self._link = profile.link
+        self._url: OnvifUrl | None = None
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._connected = threading.Event()
+        self._worker: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._wake: asyncio.Event | None = None
+        self._target: DeviceTarget | None = None
+        self._seq = 0
+        self._sent_seq = 0
+        self._queries: deque[Future] = deque()
+        self._clamped: tuple[str, ...] = ()
+        self._ever_connected = False
+        self._outage_since: float | None = None
+        self._unauthorised = False
+        self.last_error: str | None = None
+        #: what discovery found: profile token, move modes, whether position and move status are reported
+        self.discovered: dict = {}
+        self._counts = dict.fromkeys(
+            ("commands", "errors", "reconnects", "moves", "status_polls", "faults", "timeouts", "malformed",
+             "unauthorised", "clamped", "superseded", "corrections", "timer_fallbacks"), 0)
+        self._latency = {"move": deque(maxlen=_LATENCIES_KEPT), "query": deque(maxlen=_LATENCIES_KEPT)}
+        self._writes: deque[tuple[int, float]] = deque(maxlen=_LATENCIES_KEPT)
+        # motion book-keeping (worker only): the goal in device units, the estimate, the move's deadline
+        self._goal: tuple[float, float, float] | None = None
+        self._estimate: list[float] = [0.0, 0.0, float(profile.zoom.position[0])]
+        self._estimate_at = 0.0
+        self._velocity = (0.0, 0.0, 0.0)  # continuous moves: units/s the camera was told
+        self._eta = 0.0
+        self._moving = False
+        self._settled = True
+        self._silent = 0
+        self._steered_at = 0.0
+        self._steer_period = 0.0
+        self._egress = _EgressClock()
+
+    # ------------------------------------------------------------------------------------
+    # Public API (as PtzDriver's)
+    # ------------------------------------------------------------------------------------
+
+    def connect(self, timeout: float | None = 5.0) -> OnvifDriver:
+        """Start the worker; wait up to ``timeout`` s for the camera (``None``: do not wait).
+
+        :class:`PtzPortError` for a malformed URL or refused credentials, :class:`PtzError` if no
+        camera was discovered in time (the driver is then stopped again).
+        """
+        if self._worker is not None:
+            return self
+        self._url = OnvifUrl.parse(self._raw_url)
+        self._stop.clear()
+        self._worker = threading.Thread(target=self._thread_main, name="ptz-onvif", daemon=True)
+        self._worker.start()
+        if timeout is not None and not self._wait_connected(timeout):
+            reason = self.last_error or "no answer"
+            unauthorised = self._unauthorised
+            self.disconnect()
+            if unauthorised:
+                raise PtzPortError(f"{self.port}: the camera refused the user name or password ({reason})")
+            raise PtzError(f"{self.port}: no ONVIF PTZ camera within {timeout:g} s ({reason})")
+        return self
+
+    def _wait_connected(self, timeout: float) -> bool:
+        """Wait for the first connection; give up early when the camera refused the credentials."""
+        deadline = time.monotonic() + timeout
+        while not self._connected.wait(min(0.05, max(0.0, deadline - time.monotonic()))):
+            if self._unauthorised or time.monotonic() >= deadline:
+                return False
+        return True
+
+    def disconnect(self) -> None:
+        """Stop the worker and close the session; pending queries fail with :class:`PtzError`."""
+        self._stop.set()
+        self._poke()
+        if self._worker is not None:
+            self._worker.join()
+            self._worker = None
+
+    def __enter__(self) -> OnvifDriver:
+        return self.connect()
+
+    def __exit__(self, *exc) -> None:
+        self.disconnect()
+
+    @property
+    def connected(self) -> bool:
+        return self._connected.is_set()
+
+    def set_target(self, pan: float, tilt: float, zoom: float) -> DeviceTarget:
+        """Aim at omnijax ``pan``, ``tilt`` (rad) with zoom factor ``zoom``; returns at once (see PtzDriver)."""
+        t = self.profile.to_device(pan, tilt, zoom)
+        if t.clamped != self._clamped:
+            if t.clamped:
+                log.warning("PTZ target clamped to the device's limits on %s (pan %.2f deg, tilt %.2f deg, "
+                            "zoom %.2fx requested)", ", ".join(t.clamped), np.degrees(pan), np.degrees(tilt), zoom)
+            else:
+                log.info("PTZ target back within the device's limits")
+            self._clamped = t.clamped
+        with self._lock:
+            if t.clamped:
+                self._counts["clamped"] += 1
+            if self._target is not None and self._sent_seq < self._seq:
+                self._counts["superseded"] += 1
+            self._target = t
+            self._seq += 1
+        self._poke()
+        return t
+
+    @property
+    def target(self) -> DeviceTarget | None:
+        return self._target
+
+    @property
+    def sequence(self) -> int:
+        with self._lock:
+            return self._seq
+
+    def take_writes(self) -> list[tuple[int, float]]:
+        """(sequence number, ``time.monotonic()``) of each move request handed to the HTTP transport since
+        the last call (for frame-to-wire latency)."""
+        with self._lock:
+            out = list(self._writes)
+            self._writes.clear()
+        return out
+
+    def capabilities(self):
+        """What this camera offers (a :class:`runtime.ptz.transports.Capabilities`), as discovered at the last
+        connect: its move modes (best first), how the end of a move is known, position read-back."""
+        from .transports import Capabilities
+
+        p = self.profile
+        with self._lock:
+            d = dict(self.discovered)
+            fallbacks = self._counts["timer_fallbacks"]
+        notes = []
+        if d and not d["position"]:
+            notes.append("no position read-back: positions are the driver's estimate")
+        if d and d["move_status"] == "timer":
+            notes.append("no MoveStatus: the end of a move is timed from the profile's slew rates")
+        if fallbacks:
+            notes.append(f"MoveStatus stayed MOVING past the predicted arrival {fallbacks} times: timer used")
+        if d and d["mode"] != "absolute":
+            notes.append(f"no AbsoluteMove: driven by {d['mode']} moves")
+        return Capabilities(
+            protocol="onvif", transport="http", move_modes=tuple(d.get("modes", ())),
+            move_status=d.get("move_status", "timer"), position=bool(d.get("position")),
+            zoom=(float(p.zoom.magnification[0]), float(p.zoom.magnification[-1])),
+            limits_deg={"pan": tuple(p.pan.limits_deg), "tilt": tuple(p.tilt.limits_deg)}, notes=tuple(notes))
+
+    def request_position(self) -> Future:
+        """Ask the camera where it is (GetStatus; the driver's estimate where the camera reports no position)."""
+        fut: Future = Future()
+        with self._lock:
+            if not self.connected:
+                fut.set_exception(PtzError(f"{self.port}: not connected"))
+                return fut
+            self._queries.append(fut)
+        self._poke()
+        return fut
+
+    def query_position(self, timeout: float = 2.0) -> PtzPosition:
+        return self.request_position().result(timeout)
+
+    def reached(self, tolerance: int = 1) -> bool:
+        """Whether the camera reports the latest target, within ``tolerance`` device units per axis."""
+        t = self._target
+        if t is None:
+            return True
+        try:
+            pos = self.query_position()
+        except (PtzError, TimeoutError):
+            return False
+        return all(self.profile.units_apart(axis, a, b) <= tolerance
+                   for axis, a, b in zip(_AXES, pos.units, (t.pan, t.tilt, t.zoom)))
+
+    def wait_reached(self, timeout: float, tolerance: int = 1, poll_s: float = 0.05) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.connected and self.reached(tolerance):
+                return True
+            time.sleep(poll_s)
+        return False
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """``commands`` (SOAP requests sent), ``errors`` (faults, time-outs, malformed replies, outages),
+        ``reconnects``."""
+        with self._lock:
+            return {k: self._counts[k] for k in ("commands", "errors", "reconnects")}
+
+    def stats(self) -> dict:
+        """All counters, what discovery found, and request-to-reply latencies (ms) of moves and queries."""
+        with self._lock:
+            out: dict = dict(self._counts)
+            lat = {k: 1e3 * np.asarray(v) for k, v in self._latency.items()}
+            out["onvif"] = dict(self.discovered)
+        out["connected"] = self.connected
+        out["moving"] = self._moving
+        out["latency_ms"] = {
+            k: ({"p50": float(np.median(v)), "p99": float(np.percentile(v, 99)), "n": int(v.size)} if v.size
+                else {"n": 0}) for k, v in lat.items()}
+        return out
+
+    # ------------------------------------------------------------------------------------
+    # Worker
+    # ------------------------------------------------------------------------------------
+
+    def _poke(self) -> None:
+        loop, wake = self._loop, self._wake
+        if loop is not None and wake is not None:
+            try:
+                loop.call_soon_threadsafe(wake.set)
+            except RuntimeError:  # the loop has just closed
+                pass
+
+    def _count(self, *names: str) -> None:
+        with self._lock:
+            for n in names:
+                self._counts[n] += 1
+
+    def _thread_main(self) -> None:
+        try:
+            asyncio.run(self._main())
+        except Exception as exc:  # the worker never dies silently: say why, fail the queries
+            log.error("PTZ ONVIF worker stopped: %s: %s", type(exc).__name__, exc)
+            self.last_error = f"{type(exc).__name__}: {exc}"
+        finally:
+            self._connected.clear()
+            self._fail_queries(f"{self.port}: driver stopped")
+
+    async def _main(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._wake = asyncio.Event()
+        backoff = self._link.reconnect_backoff_s[0]
+        while not self._stop.is_set():
+            cam = None
+            try:
+                cam = await self._open()
+                backoff = self._link.reconnect_backoff_s[0]
+                await self._serve(cam)
+            except _LinkLost as exc:
+                if not self._stop.is_set():
+                    self._fail(str(exc), isinstance(exc, _Unauthorised))
+            except Exception as exc:  # anything the library raised that _call did not classify
+                if not self._stop.is_set():
+                    self._fail(f"{type(exc).__name__}: {exc}", False)
+            finally:
+                self._connected.clear()
+                if cam is not None:
+                    await self._close(cam)
+            if not self._stop.is_set() and not self.connected:
+                await self._sleep(backoff)
+                backoff = min(2 * backoff, self._link.reconnect_backoff_s[1])
+
+    def _fail(self, reason: str, unauthorised: bool) -> None:
+        self.last_error = reason
+        self._unauthorised = unauthorised or (self._unauthorised and not self._ever_connected)
+        if unauthorised:
+            self._count("unauthorised")
+        first = self._outage_since is None
+        if first:
+            self._outage_since = time.monotonic()
+            self._count("errors")
+        (log.warning if first else log.debug)("PTZ link lost on %s: %s; reconnecting", self.port, reason)
+        self._fail_queries(f"{self.port}: {reason}")
+
+    def _fail_queries(self, reason: str) -> None:
+        with self._lock:
+            queries, self._queries = list(self._queries), deque()
+        for fut in queries:
+            if not fut.done():
+                fut.set_exception(PtzError(reason))
+
+    async def _sleep(self, seconds: float) -> None:
+        """Sleep up to ``seconds``, waking early for a new target, a query or a stop."""
+        wake = self._wake
+        wake.clear()
+        try:
+            await asyncio.wait_for(wake.wait(), max(0.0, seconds))
+        except TimeoutError:
+            pass
+
+    async def _close(self, cam) -> None:
+        try:
+            await asyncio.wait_for(cam.close(), 2.0)
+        except Exception as exc:  # closing a session of a vanished camera may fail in many ways
+            log.debug("PTZ ONVIF: closing the session: %s", exc)
+
+    # -- requests --------------------------------------------------------------------------
+
+    async def _call(self, service, operation: str, params: dict | None = None, *, kind: str = "",
+                    fatal: bool = False):
+        """One SOAP request; the reply object (``True`` for an empty one), or ``None`` after a fault, a
+        time-out or a malformed reply (each counted). Raises :class:`_LinkLost` after ``link.max_silent``
+        failures in a row, for refused credentials, for a refused connection, or at once when ``fatal``."""
+        import aiohttp
+        import zeep.exceptions
+
+        name = operation if self._url.user else f"authless_{operation}"
+        self._count("commands")
+        t0 = time.perf_counter()
+        why = ""
+        try:
+            reply = await asyncio.wait_for(getattr(service, name)(params or {}), self._link.ack_timeout_s)
+        except zeep.exceptions.Fault as exc:
+            subcode = str(getattr(exc, "subcodes", "") or "")
+            text = f"{exc.message or 'SOAP fault'}"
+            if "NotAuthorized" in subcode or "NotAuthorized" in text or "not authori" in text.lower():
+                raise _Unauthorised(f"{operation}: {text}") from None
+            self._count("faults", "errors")
+            log.warning("PTZ ONVIF: %s refused: %s", operation, text)
+            if fatal:
+                raise _LinkLost(f"{operation} refused: {text}") from None
+            self._silent = 0  # the camera answered
+            return None
+        except TimeoutError:
+            self._count("timeouts", "errors")
+            why = f"no answer to {operation} within {self._link.ack_timeout_s:g} s"
+        except (aiohttp.ClientConnectionError, ConnectionError) as exc:
+            raise _LinkLost(f"{operation}: {exc or type(exc).__name__}") from None
+        except Exception as exc:  # malformed replies surface as many types from zeep, lxml and the library
+            if self._is_http_auth_failure(exc):
+                raise _Unauthorised(f"{operation}: HTTP 401") from None
+            if isinstance(exc, aiohttp.ClientError) or "Cannot connect" in str(exc):
+                raise _LinkLost(f"{operation}: {exc}") from None
+            self._count("malformed", "errors")
+            why = f"malformed reply to {operation}: {type(exc).__name__}: {str(exc)[:120]}"
+        else:
+            self._silent = 0
+            if kind:
+                with self._lock:
+                    self._latency[kind].append(time.perf_counter() - t0)
+            return True if reply is None else reply  # an empty response (AbsoluteMoveResponse) is a success
+        self._silent += 1
+        log.warning("PTZ ONVIF: %s", why)
+        if fatal or self._silent >= self._link.max_silent:
+            raise _LinkLost(why if fatal else f"{self._silent} requests in a row failed ({why})")
+        return None
+
+    @staticmethod
+    def _is_http_auth_failure(exc: Exception) -> bool:
+        status = getattr(exc, "status_code", None) or getattr(exc, "status", None)
+        return status == 401
+
+    # -- discovery -------------------------------------------------------------------------
+
+    async def _open(self):
+        from onvif import ONVIFCamera
+
+        u = self._url
+        cam = ONVIFCamera(u.host, u.port, u.user or "", u.password or "", no_cache=True)
+        try:
+            await self._discover(cam)
+        except BaseException:
+            await self._close(cam)
+            raise
+        with self._lock:
+            if self._ever_connected:
+                self._counts["reconnects"] += 1
+            self._ever_connected = True
+            self._sent_seq = 0  # the latest target is sent again
+        self._unauthorised = False
+        self._connected.set()
+        outage, self._outage_since = self._outage_since, None
+        d = self.discovered
+        log.info("PTZ connected on %s (ONVIF, profile %s, %s moves, status: %s)%s", self.port,
+                 d["profile_token"], d["mode"], d["move_status"],
+                 "" if outage is None else f" after {time.monotonic() - outage:.2f} s without")
+        return cam
+
+    async def _discover(self, cam) -> None:
+        self._silent = 0
+        device = await cam.create_devicemgmt_service()
+        services = await self._call(device, "GetServices", {"IncludeCapability": False}, fatal=True)
+        xaddrs = {}
+        for s in services or []:
+            ns, xaddr = getattr(s, "Namespace", None), getattr(s, "XAddr", None)
+            if isinstance(ns, str) and isinstance(xaddr, str):
+                xaddrs[ns] = xaddr
+        if not xaddrs:
+            caps = await self._call(device, "GetCapabilities", {"Category": "All"}, fatal=True)
+            for name, ns in (("Media", "http://www.onvif.org/ver10/media/wsdl"),
+                             ("PTZ", "http://www.onvif.org/ver20/ptz/wsdl")):
+                xaddr = getattr(getattr(caps, name, None), "XAddr", None)
+                if isinstance(xaddr, str):
+                    xaddrs[ns] = xaddr
+        cam.xaddrs = xaddrs
+        for ns, what in (("http://www.onvif.org/ver10/media/wsdl", "media"),
+                         ("http://www.onvif.org/ver20/ptz/wsdl", "PTZ")):
+            if ns not in xaddrs:
+                raise _LinkLost(f"the camera offers no {what} service")
+        media = await cam.create_media_service()
+        ptz = await cam.create_ptz_service()
+        for svc in (device, media, ptz):
+            for client in (svc.zeep_client, svc.zeep_client_authless):
+                client.plugins.append(self._egress)
+        profiles = await self._call(media, "GetProfiles", fatal=True) or []
+        chosen = next((p for p in profiles if getattr(p, "PTZConfiguration", None) is not None), None)
+        if chosen is None or not isinstance(getattr(chosen, "token", None), str):
+            raise _LinkLost("no media profile with a PTZ configuration")
+        config_token = getattr(chosen.PTZConfiguration, "token", None)
+        options = await self._call(ptz, "GetConfigurationOptions", {"ConfigurationToken": config_token}, fatal=True)
+        spaces = getattr(options, "Spaces", None)
+
+        def offered(name: str) -> bool:
+            return bool(getattr(spaces, name, None))
+
+        modes = [m for m, space in (("absolute", "AbsolutePanTiltPositionSpace"),
+                                    ("relative", "RelativePanTiltTranslationSpace"),
+                                    ("continuous", "ContinuousPanTiltVelocitySpace")) if offered(space)]
+        if not modes:
+            raise _LinkLost("the camera offers no pan/tilt move (no absolute, relative or continuous space)")
+        zoom_modes = [m for m, space in (("absolute", "AbsoluteZoomPositionSpace"),
+                                         ("relative", "RelativeZoomTranslationSpace"),
+                                         ("continuous", "ContinuousZoomVelocitySpace")) if offered(space)]
+        self._ptz, self._token = ptz, chosen.token
+        status = await self._call(ptz, "GetStatus", {"ProfileToken": chosen.token}, fatal=True)
+        pos = self._position_of(status)
+        move_status = getattr(getattr(status, "MoveStatus", None), "PanTilt", None)
+        with self._lock:
+            self.discovered = {
+                "host": self._url.host, "port": self._url.port, "profile_token": chosen.token,
+                "configuration_token": config_token, "modes": modes, "zoom_modes": zoom_modes, "mode": modes[0],
+                "position": pos is not None, "move_status": "status" if move_status is not None else "timer",
+                "services": sorted(xaddrs),
+            }
+        now = time.monotonic()
+        if pos is not None:
+            self._estimate, self._estimate_at = list(pos), now
+        self._goal, self._moving, self._settled, self._velocity = None, False, True, (0.0, 0.0, 0.0)
+
+    def _position_of(self, status) -> tuple[float, float, float] | None:
+        """GetStatus' position in device units (floats), or ``None`` where the camera reports none or
+        nonsense."""
+        p = getattr(status, "Position", None)
+        pt, z = getattr(p, "PanTilt", None), getattr(p, "Zoom", None)
+        try:
+            xs = (float(pt.x), float(pt.y), float(z.x))
+        except (AttributeError, TypeError, ValueError):
+            return None
+        if not all(math.isfinite(v) for v in xs) or not (-1.5 <= xs[0] <= 1.5 and -1.5 <= xs[1] <= 1.5
+                                                         and -0.5 <= xs[2] <= 1.5):
+            self._count("malformed")
+            return None
+        return tuple(self.profile.from_normalised(a, x) for a, x in zip(_AXES, xs))
+
+    def _reported_moving(self, status) -> bool | None:
+        ms = getattr(status, "MoveStatus", None)
+        if ms is None:
+            return None
+        words = [str(getattr(ms, g, "") or "").upper() for g in ("PanTilt", "Zoom")]
+        if not any(words):
+            return None
+        return any(w == "MOVING" for w in words)
+
+    # -- serving ---------------------------------------------------------------------------
+
+    async def _serve(self, cam) -> None:
+        poll = max(self._link.retry_delay_s, 0.01)
+        next_send = 0.0
+        while not self._stop.is_set():
+            with self._lock:
+                query = self._queries.popleft() if self._queries else None
+            if query is not None:
+                await self._answer_query(query)
+                continue
+            now = time.monotonic()
+            with self._lock:
+                target, seq = self._target, self._seq
+                fresh = target is not None and self._sent_seq < seq
+            if fresh and now >= next_send:
+                with self._lock:
+                    self._sent_seq = seq
+                await self._move(target, seq)
+                next_send = time.monotonic() + self._link.min_interval_s
+                continue
+            if not self._settled:
+                await self._follow()
+                await self._sleep(poll)
+                continue
+            await self._sleep(next_send - now if fresh else _IDLE_S)
+        if any(self._velocity):  # leaving mid continuous move: stop the camera now, not at the move's time-out
+            self._count("moves")
+            await self._call(self._ptz, "Stop", {"ProfileToken": self._token, "PanTilt": True, "Zoom": True})
+            self._velocity = (0.0, 0.0, 0.0)
+
+    def _estimate_now(self, now: float) -> list[float]:
+        """Where the camera should be by now: the last known position moved toward the goal at the
+        slew rates (absolute and relative moves), or by the commanded velocity (continuous)."""
+        dt = max(0.0, now - self._estimate_at)
+        est = list(self._estimate)
+        for i, axis in enumerate(_AXES):
+            if any(self._velocity):
+                est[i] += self._velocity[i] * dt
+            elif self._goal is not None:
+                d = self._goal[i] - est[i]
+                step = self._rate(axis) * dt
+                est[i] = self._goal[i] if abs(d) <= step else est[i] + math.copysign(step, d)
+            lo, hi = self._limits(axis)
+            est[i] = min(max(est[i], lo), hi)
+        return est
+
+    def _set_estimate(self, est, now: float) -> None:
+        self._estimate, self._estimate_at = list(est), now
+
+    def _rate(self, axis: str) -> float:
+        z = self.profile.zoom
+        return ((z.position[-1] - z.position[0]) / z.seconds_full_range if axis == "zoom"
+                else self.profile.slew_units_s(axis))
+
+    def _limits(self, axis: str) -> tuple[float, float]:
+        if axis == "zoom":
+            return float(self.profile.zoom.position[0]), float(self.profile.zoom.position[-1])
+        return tuple(map(float, self.profile.limits_units(axis)))
+
+    def _travel_s(self, frm, to) -> float:
+        return max(abs(b - a) / self._rate(axis) for axis, a, b in zip(_AXES, frm, to))
+
+    async def _status(self):
+        self._count("status_polls")
+        return await self._call(self._ptz, "GetStatus", {"ProfileToken": self._token}, kind="query")
+
+    async def _move(self, t: DeviceTarget, seq: int) -> None:
+        goal = (float(t.pan), float(t.tilt), float(t.zoom))
+        mode = self.discovered["mode"]
+        now = time.monotonic()
+        here = self._estimate_now(now)
+        if mode == "relative" and self.discovered["position"]:
+            status = await self._status()
+            pos = self._position_of(status)
+            if pos is not None:
+                here = list(pos)
+                now = time.monotonic()
+        self._goal, self._velocity = goal, (0.0, 0.0, 0.0)
+        if mode == "continuous":
+            self._set_estimate(here, now)
+            self._settled = False
+            await self._steer(here)
+            return
+        p = self.profile
+        if mode == "absolute":
+            vec = {axis: p.to_normalised(axis, g) for axis, g in zip(_AXES, goal)}
+            params = {"ProfileToken": self._token,
+                      "Position": {"PanTilt": {"x": vec["pan"], "y": vec["tilt"]}, "Zoom": {"x": vec["zoom"]}}}
+            op = "AbsoluteMove"
+        else:
+            d = {axis: (g - h) / p.normalised_scale(axis) for axis, g, h in zip(_AXES, goal, here)}
+            params = {"ProfileToken": self._token,
+                      "Translation": {"PanTilt": {"x": d["pan"], "y": d["tilt"]}, "Zoom": {"x": d["zoom"]}}}
+            op = "RelativeMove"
+        self._count("moves")
+        reply = await self._call(self._ptz, op, params, kind="move")
+        if reply is None:
+            if self._silent:  # unanswered or garbled (counted): it may not have moved, send the latest again
+                with self._lock:
+                    self._sent_seq = 0
+            return  # a fault (counted): sent again when the target changes
+        with self._lock:
+            self._writes.append((seq, self._egress.at))
+        self._set_estimate(here, now)
+        self._eta = now + self._travel_s(here, goal) + self._link.retry_delay_s
+        self._moving, self._settled = True, False
+
+    async def _steer(self, here) -> None:
+        """Continuous mode: a velocity toward the goal, or Stop once within a unit on every axis."""
+        err = [g - h for g, h in zip(self._goal, here)]
+        if all(abs(e) <= 0.5 for e in err):
+            if any(self._velocity):
+                self._count("moves")
+                await self._call(self._ptz, "Stop", {"ProfileToken": self._token, "PanTilt": True, "Zoom": True})
+            self._velocity, self._moving, self._settled = (0.0, 0.0, 0.0), False, True
+            return
+        # the camera keeps the velocity until the next command: cover at most half the error per control period
+        # (measured), so that the loop stays stable however slow the link or the machine is
+        now = time.monotonic()
+        if 0 < now - self._steered_at < 2.0:
+            self._steer_period = 0.7 * self._steer_period + 0.3 * (now - self._steered_at)
+        self._steered_at = now
+        tau = max(_CONTINUOUS_TAU_S, 2.0 * self._steer_period)
+        v = [max(-1.0, min(1.0, e / (self._rate(a) * tau))) for a, e in zip(_AXES, err)]
+        params = {"ProfileToken": self._token, "Velocity": {"PanTilt": {"x": v[0], "y": v[1]}, "Zoom": {"x": v[2]}},
+                  "Timeout": f"PT{_CONTINUOUS_TIMEOUT_S:g}S"}
+        self._count("moves")
+        reply = await self._call(self._ptz, "ContinuousMove", params, kind="move")
+        if reply is not None:
+            with self._lock:
+                self._writes.append((self._seq, self._egress.at))
+            self._velocity = tuple(vi * self._rate(a) for vi, a in zip(v, _AXES))
+            self._moving = True
+
+    async def _follow(self) -> None:
+        """While a move runs: poll the status; say when it is over; correct relative moves, steer continuous."""
+        mode = self.discovered["mode"]
+        now = time.monotonic()
+        status = await self._status() if self.discovered["position"] or self.discovered["move_status"] == "status" \
+            else None
+        pos = self._position_of(status) if status is not None else None
+        est = list(pos) if pos is not None else self._estimate_now(now)
+        self._set_estimate(est, now)
+        if mode == "continuous":
+            if pos is None:  # dead reckoning: the velocity holds until the next command
+                self._estimate_at = now
+            await self._steer(est)
+            return
+        reported = self._reported_moving(status) if status is not None else None
+        deadline = min(self._eta, now + self._link.completion_timeout_s)
+        if reported is False or now >= deadline:
+            if reported is True:
+                self._count("timer_fallbacks")  # the camera still says MOVING: believe the timer
+            self._moving, self._settled = False, True
+            if mode == "relative" and pos is not None and self._goal is not None and \
+                    max(abs(g - p) for g, p in zip(self._goal, pos)) > 1:
+                self._count("corrections")
+                with self._lock:
+                    self._sent_seq = 0  # send the latest target again, as a translation from where it is
+        elif reported is None and now >= self._eta:
+            self._count("timer_fallbacks")
+
+    async def _answer_query(self, fut: Future) -> None:
+        if not self.discovered.get("position"):
+            est = self._estimate_now(time.monotonic())
+            fut.set_result(self.profile.from_device(*(round(v) for v in est)))
+            return
+        try:
+            status = await self._status()
+        except _LinkLost as exc:
+            fut.set_exception(PtzError(f"{self.port}: position inquiry failed ({exc})"))
+            raise
+        pos = self._position_of(status) if status is not None else None
+        if pos is None:
+            fut.set_exception(PtzError(f"{self.port}: position inquiry failed (no usable GetStatus)"))
+            return
+        self._set_estimate(pos, time.monotonic())
+        fut.set_result(self.profile.from_device(*(round(v) for v in pos)))
+
