@@ -6,8 +6,10 @@ Per frame (each stage timed):
    rejected there, broken and wrong-size frames are counted here and skipped);
 2. ``detect``: the jitted detector and the detections' floor positions (one compiled call);
 3. ``track``: the Kalman (or nearest-neighbour) tracker;
-4. ``aim``: the target chosen, its head predicted to when the PTZ will get there (tracking and
-   latency uncertainty included), pan/tilt, their covariance and the zoom of both rules (jitted);
+4. ``aim``: the target chosen (only trusted tracks the PTZ can frame at ``p_contain``: else the
+   loop holds and counts why, ``held_untrusted`` or ``held_unframeable``), its head predicted to
+   when the PTZ will get there (tracking and latency uncertainty included), pan/tilt, their
+   covariance and the zoom of both rules (jitted);
 5. ``send``: the PTZ command through the driver, unless it falls in the dead-zone;
 6. afterwards, off the latency path: the hooks (``draw``: the annotated frame, the demo's
    scoring), the log line, the background update.
@@ -49,7 +51,7 @@ from omnijax.geometry import wrap_pi
 from omnijax.zoom import ZOOM_RULES
 from runtime.realtime.config import LoopConfig
 from runtime.realtime.sources import Capture, Frame
-from runtime.realtime.targeting import TargetSelector, outside_dead_zone
+from runtime.realtime.targeting import TargetSelector, can_frame, outside_dead_zone, trust_rule
 from runtime.realtime.tracker import Tracker
 
 STAGES = ("capture", "detect", "track", "aim", "send", "log", "draw", "adapt")
@@ -146,12 +148,13 @@ class RealTimeLoop:
         self.bg = background
         self.lines = line_background(detector, background)
         self.tracker = Tracker(config.tracker)
-        self.selector = TargetSelector(config.target, config.dwell_s)
+        self.selector = TargetSelector(config.target, config.dwell_s, trust_rule(config))
         self.timings = Timings()
         self.on_frame = on_frame
         self.log_path = log_path
         self.counts = {"frames": 0, "broken": 0, "wrong_size": 0, "commands_sent": 0, "dead_zone": 0,
-                       "no_target": 0, "invalid_geometry": 0, "deadline_overruns": 0}
+                       "no_target": 0, "held_untrusted": 0, "held_unframeable": 0, "invalid_geometry": 0,
+                       "deadline_overruns": 0}
         self.sent: tuple[float, float, float] | None = None
         self.sent_at: float | None = None
         self._arrive_at = 0.0
@@ -253,7 +256,7 @@ class RealTimeLoop:
         command = self._aim(frame, confirmed)
         t = self._record("aim", t)
         if command is not None and command.sent:
-            self._send(command)
+            self._send(command, frame.stamp)
         t_sent = time.monotonic()
         self._record("send", t)
         if command is not None and command.sent:
@@ -264,6 +267,8 @@ class RealTimeLoop:
                 self._pending[self.driver.sequence] = frame.t
         self._collect_writes()
         t = t_sent
+        if command is None and self.selector.held is not None:
+            record["held"] = self.selector.held
         if self.on_frame is not None:
             record.update(self.on_frame(record, frame, dets, z, tracks, command) or {})
         t = self._record("draw", t)
@@ -280,11 +285,12 @@ class RealTimeLoop:
         if self.period and elapsed > self.period:
             self.counts["deadline_overruns"] += 1
 
-    def _settled(self) -> bool:
-        """Whether the PTZ should have reached the last command by now (slew-time estimate)."""
+    def _settled(self, stamp: float) -> bool:
+        """Whether the PTZ should have reached the last command by the frame stamped ``stamp`` (slew-time
+        estimate on the frames' clock, so that ``--pace all`` runs are repeatable)."""
         if self.sent_at is None or self.sent is None:
             return False
-        return time.monotonic() >= self._arrive_at
+        return stamp >= self._arrive_at
 
     def _slew_time(self, target: tuple[float, float, float], zoom: bool = True) -> float:
         """Seconds the PTZ needs from the last command to ``target`` (device slew rates, and the zoom
@@ -299,23 +305,35 @@ class RealTimeLoop:
         return max(d_pan / self.profile.pan.slew_deg_s(), d_tilt / self.profile.tilt.slew_deg_s(),
                    d_zoom * zp.seconds_full_range if zoom else 0.0)
 
-    def _aim(self, frame: Frame, tracks) -> Command | None:
-        target = self.selector.choose(frame.stamp, tracks, self._settled())
-        if target is None:
-            self.counts["no_target"] += 1
-            return None
-        # the head is predicted to when the PTZ's pan and tilt get there (their slew time from the last
-        # command), refined once; the zoom keeps adjusting meanwhile and does not lengthen the horizon,
-        # which would widen the uncertainty, hence the zoom, hence the horizon
+    def _aim_track(self, stamp: float, track):
+        """The aim at ``track``'s head predicted to when the PTZ's pan and tilt get there (their slew
+        time from the last command), refined once; the zoom keeps adjusting meanwhile and does not
+        lengthen the horizon, which would widen the uncertainty, hence the zoom, hence the horizon.
+        Returns the :class:`Aim`, the time predicted for and the predicted state covariance."""
         lead = 0.0
         for _ in range(2):
-            t_predicted = frame.stamp + lead
-            xp, Pp = target.predict(t_predicted, self.tracker.accel_sd)
+            t_predicted = stamp + lead
+            xp, Pp = track.predict(t_predicted, self.tracker.accel_sd)
             aimed = aim_at_floor(self.rig, jnp.asarray(xp[:2]), jnp.asarray(Pp[:2, :2]), ZOOM_RULES)
             lead = self._slew_time((float(aimed.pointing.pan), float(aimed.pointing.tilt), 1.0), zoom=False)
-        if not bool(aimed.pointing.valid):
-            self.counts["invalid_geometry"] += 1
+        return aimed, t_predicted, Pp
+
+    def _aim(self, frame: Frame, tracks) -> Command | None:
+        aims: dict[int, tuple] = {}
+
+        def framable(track) -> bool:
+            aims[track.id] = self._aim_track(frame.stamp, track)
+            if not bool(aims[track.id][0].pointing.valid):
+                self.counts["invalid_geometry"] += 1
+            return can_frame(aims[track.id][0], self.cfg.zoom_rule)
+
+        target = self.selector.choose(frame.stamp, tracks, self._settled(frame.stamp), framable)
+        if target is None:
+            self.counts["no_target"] += 1
+            if self.selector.held is not None:
+                self.counts[f"held_{self.selector.held}"] += 1
             return None
+        aimed, t_predicted, Pp = aims[target.id]
         zooms = {rule: float(aimed.zooms[rule].zoom) for rule in ZOOM_RULES}
         pan, tilt, zoom = float(aimed.pointing.pan), float(aimed.pointing.tilt), zooms[self.cfg.zoom_rule]
         cov = np.asarray(aimed.covariance.cov)
@@ -328,11 +346,12 @@ class RealTimeLoop:
                        sd_tilt=sd_tilt, sent=send, t_predicted=t_predicted, aimed=aimed,
                        floor_sd=np.sqrt(np.diag(Pp)[:2]))
 
-    def _send(self, cmd: Command) -> None:
+    def _send(self, cmd: Command, stamp: float) -> None:
+        """Hand ``cmd`` to the driver; the PTZ is expected there its slew time after the frame ``stamp``."""
         if self.driver is not None:
             self.driver.set_target(cmd.pan, cmd.tilt, cmd.zoom)
             time.sleep(0)  # hand the GIL to the driver's worker now, so that the bytes go out before the logging
-        self._arrive_at = time.monotonic() + self._slew_time((cmd.pan, cmd.tilt, cmd.zoom))
+        self._arrive_at = stamp + self._slew_time((cmd.pan, cmd.tilt, cmd.zoom))
         self.sent = (cmd.pan, cmd.tilt, cmd.zoom)
         self.sent_at = time.monotonic()
         self._sent_track = cmd.track
@@ -421,6 +440,8 @@ class RealTimeLoop:
             "captures": self.selector.captures,
             "config": {"zoom_rule": self.cfg.zoom_rule, "tracker": self.cfg.tracker, "target": self.cfg.target,
                        "dwell_s": self.cfg.dwell_s, "dead_zone_sd": self.cfg.dead_zone_sd,
+                       "trust": {"hits": self.cfg.trust_hits, "window": self.cfg.trust_window,
+                                 "min_age_s": self.cfg.trust_age_s, "min_travel_m": self.cfg.trust_travel_m},
                        "inputs": list(INPUT_NAMES)},
         }
 

@@ -6,6 +6,11 @@ Kalman filter's state is (X, Y, vX, vY) in metres and m/s, with white-accelerati
 detections are assigned to tracks by SciPy's ``linear_sum_assignment`` on the Mahalanobis distance,
 gated at its chi-square(2) 99.9 % quantile. A track is confirmed after ``confirm`` hits and dropped
 after ``max_misses`` frames without a detection.
+
+Each track also keeps what decides whether it is *trusted* as a person
+(:func:`runtime.realtime.targeting.is_trusted`): its hits over the last :data:`HISTORY` frames
+(``recent``, a bit mask, bit 0 the latest frame), when it was born, where (``origin``) and how far
+its filtered position has since moved from there (``travel``, m).
 """
 
 from __future__ import annotations
@@ -18,6 +23,8 @@ from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
 GATE = float(chi2.ppf(0.999, 2))
+#: Frames of hit/miss history a track keeps (``Track.recent``).
+HISTORY = 32
 
 
 @dataclass
@@ -33,6 +40,17 @@ class Track:
     captured: bool = False
     detection: int | None = None  # index of the detection it was updated with this frame
     extra: dict = field(default_factory=dict)
+    recent: int = 1  # hits over the last HISTORY frames, bit 0 the latest
+    born: float | None = None  # time of the first detection (default: ``t``)
+    origin: np.ndarray | None = None  # position at birth (default: ``x[:2]``)
+    travel: float = 0.0  # largest distance of the filtered position from ``origin``, m
+    trusted: bool = False  # set once by ``targeting.is_trusted`` and kept
+
+    def __post_init__(self):
+        if self.born is None:
+            self.born = self.t
+        if self.origin is None:
+            self.origin = np.array(self.x[:2], float)
 
     @property
     def position(self) -> np.ndarray:
@@ -94,9 +112,11 @@ class Tracker:
             tr.hits += 1
             tr.misses = 0
             tr.detection = int(k)
+            tr.travel = max(tr.travel, float(np.linalg.norm(tr.position - tr.origin)))
             matched_tracks.add(ti)
             matched_dets.add(k)
         for ti, tr in enumerate(self.tracks):
+            tr.recent = ((tr.recent << 1) | (ti in matched_tracks)) & ((1 << HISTORY) - 1)
             if ti not in matched_tracks:
                 tr.misses += 1
         self.tracks = [tr for tr in self.tracks if tr.misses <= self.max_misses]
