@@ -37,6 +37,11 @@ class LoopConfig:
     trust_travel_m: float = setting(0.5, "trust a track only once it has moved D from where it was born (a "
                                     "static blob on empty floor never does; 0: trust static tracks)",
                                     unit="metres", metavar="D", ge=0)
+    # ghost sites (TrustRule): where an untrusted track stayed static this long, tracks within the radius lose
+    # trust, until the site has not been seen for its life
+    trust_site_s: float = 1.0
+    trust_site_radius_m: float = 0.4
+    trust_site_life_s: float = 10.0
     adapt_every: int = 2
     home: tuple[float, float, float] = (0.0, 0.0, 1.0)
     status_every_s: float = 0.5

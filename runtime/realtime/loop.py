@@ -21,6 +21,7 @@ the PTZ home, writes the summary and closes the outputs.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import signal
@@ -440,8 +441,7 @@ class RealTimeLoop:
             "captures": self.selector.captures,
             "config": {"zoom_rule": self.cfg.zoom_rule, "tracker": self.cfg.tracker, "target": self.cfg.target,
                        "dwell_s": self.cfg.dwell_s, "dead_zone_sd": self.cfg.dead_zone_sd,
-                       "trust": {"hits": self.cfg.trust_hits, "window": self.cfg.trust_window,
-                                 "min_age_s": self.cfg.trust_age_s, "min_travel_m": self.cfg.trust_travel_m},
+                       "trust": dataclasses.asdict(self.selector.trust),
                        "inputs": list(INPUT_NAMES)},
         }
 

@@ -21,6 +21,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
+
 from omnijax.geometry import wrap_pi
 from runtime.realtime.tracker import HISTORY, Track
 
@@ -41,26 +43,38 @@ class TrustRule:
     person who stops walking stays a target; someone standing still from their first frame is not
     targeted until they move. ``hits = 0``, ``min_age_s = 0`` and ``min_travel_m = 0`` trust
     every confirmed track (the behaviour before trust existed).
+
+    Ghost sites (:class:`GhostSites`): a place where an untrusted track has stayed static (moved
+    less than ``min_travel_m``) for ``site_s`` seconds is a ghost site until ``site_life_s`` after
+    such a track was last seen there. A track within ``site_radius_m`` of a ghost site loses its
+    trust and starts its travel anew from there: a trusted track that took over a ghost's
+    detections when its person walked past (and stays on the ghost while the person walks on) is
+    no longer targeted, and a person passing a ghost site is targeted again once ``min_travel_m``
+    beyond it. ``site_radius_m = 0`` turns ghost sites off.
     """
 
     hits: int = 8
     window: int = 10
     min_age_s: float = 0.4
     min_travel_m: float = 0.5
+    site_s: float = 1.0
+    site_radius_m: float = 0.4
+    site_life_s: float = 10.0
 
     def __post_init__(self):
         if not 1 <= self.window <= HISTORY:
             raise ValueError(f"trust window must be 1 to {HISTORY} frames, got {self.window}")
         if not 0 <= self.hits <= self.window:
             raise ValueError(f"trust hits must be 0 to the window ({self.window}), got {self.hits}")
-        if self.min_age_s < 0 or self.min_travel_m < 0:
-            raise ValueError(f"trust age and travel must be >= 0, got {self.min_age_s} s, {self.min_travel_m} m")
+        if min(self.min_age_s, self.min_travel_m, self.site_s, self.site_radius_m, self.site_life_s) < 0:
+            raise ValueError(f"trust times and distances must be >= 0, got {self}")
 
 
 def trust_rule(config) -> TrustRule:
     """The :class:`TrustRule` of a :class:`~runtime.realtime.config.LoopConfig` (its ``trust_*`` fields)."""
     return TrustRule(hits=config.trust_hits, window=config.trust_window, min_age_s=config.trust_age_s,
-                     min_travel_m=config.trust_travel_m)
+                     min_travel_m=config.trust_travel_m, site_s=config.trust_site_s,
+                     site_radius_m=config.trust_site_radius_m, site_life_s=config.trust_site_life_s)
 
 
 def is_trusted(track: Track, rule: TrustRule) -> bool:
@@ -71,6 +85,45 @@ def is_trusted(track: Track, rule: TrustRule) -> bool:
         track.trusted = (hits >= rule.hits and track.t - track.born >= rule.min_age_s
                          and track.travel >= rule.min_travel_m)
     return track.trusted
+
+
+def distrust(track: Track) -> None:
+    """Take ``track``'s trust away: it must move ``min_travel_m`` from where it is now to regain it."""
+    track.trusted = False
+    track.origin = np.array(track.position, float)
+    track.travel = 0.0
+
+
+class GhostSites:
+    """Places where untrusted tracks stayed static (see :class:`TrustRule`): ``sites`` rows are
+    (x, y, time last seen)."""
+
+    def __init__(self, rule: TrustRule):
+        self.rule = rule
+        self.sites = np.zeros((0, 3))
+
+    def update(self, t: float, tracks: list[Track]) -> None:
+        """Mark or refresh a site under each static untrusted track, forget sites not seen for
+        ``site_life_s``, and take the trust of every track on a site away (:func:`distrust`)."""
+        r = self.rule
+        if r.site_radius_m <= 0:
+            return
+        for tr in tracks:
+            if not tr.trusted and tr.travel < r.min_travel_m and tr.t - tr.born >= r.site_s:
+                d = np.hypot(*(self.sites[:, :2] - tr.position).T) if len(self.sites) else np.zeros(0)
+                if d.size and d.min() <= r.site_radius_m:
+                    self.sites[np.argmin(d), 2] = t
+                else:
+                    self.sites = np.vstack([self.sites, [*tr.position, t]])
+        self.sites = self.sites[t - self.sites[:, 2] <= r.site_life_s]
+        for tr in tracks:
+            if self.near(tr.position):
+                distrust(tr)
+
+    def near(self, xy) -> bool:
+        """Whether floor point ``xy`` (m) is within ``site_radius_m`` of a ghost site."""
+        return bool(len(self.sites)) and bool(
+            np.hypot(*(self.sites[:, :2] - np.asarray(xy)).T).min() <= self.rule.site_radius_m)
 
 
 def can_frame(aimed, rule: str) -> bool:
@@ -86,6 +139,7 @@ class TargetSelector:
         if mode not in TARGET_MODES:
             raise ValueError(f"target mode must be one of {TARGET_MODES}, got {mode!r}")
         self.mode, self.dwell_s, self.trust = mode, dwell_s, trust
+        self.ghosts = GhostSites(trust) if trust is not None else None
         self.current: int | None = None
         self.settled_at: float | None = None
         self.captures = 0
@@ -99,6 +153,7 @@ class TargetSelector:
         self.held = None
         present = bool(tracks)
         if self.trust is not None:
+            self.ghosts.update(t, tracks)
             tracks = [tr for tr in tracks if is_trusted(tr, self.trust)]
         ok = framable or (lambda _tr: True)
         cur = next((tr for tr in tracks if tr.id == self.current), None)

@@ -7,7 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from runtime.realtime.targeting import TargetSelector, TrustRule, can_frame, is_trusted, outside_dead_zone
+from runtime.realtime.targeting import (
+    GhostSites,
+    TargetSelector,
+    TrustRule,
+    can_frame,
+    is_trusted,
+    outside_dead_zone,
+)
 from runtime.realtime.tracker import Track, Tracker
 
 
@@ -233,3 +240,29 @@ def test_settling_runs_on_the_frames_clock_not_the_wall_clock(monkeypatch):
                        t_predicted=10.0), stamp=10.0)
     assert not loop._settled(10.0 + slew - 1e-6)
     assert loop._settled(10.0 + slew)
+
+
+def test_a_track_that_stops_on_a_ghost_site_loses_trust_and_regains_it_by_walking_on():
+    """A ghost track static at (2, 1) for 1.2 s marks a ghost site; a trusted track that comes to it
+    loses its trust there (while the ghost is still seen, and for site_life_s after), and regains it
+    once min_travel_m beyond the site."""
+    rule = TrustRule(site_s=1.0, site_radius_m=0.4, site_life_s=10.0)
+    sites = GhostSites(rule)
+    ghost = Track(id=1, x=np.array([2.0, 1.0, 0, 0]), P=np.eye(4), t=0.0)
+    person = Track(id=2, x=np.array([0.0, 1.0, 0, 0]), P=np.eye(4), t=0.0, trusted=True)
+    ghost.t = person.t = 1.2
+    sites.update(1.2, [ghost, person])
+    assert sites.near((2.1, 1.1)) and not sites.near((2.5, 1.0)) and is_trusted(person, rule)
+    person.x[:2] = (1.9, 1.05)  # the person's track took over the ghost's detections
+    sites.update(1.3, [person])
+    assert not is_trusted(person, rule) and person.travel == 0.0
+    sites.update(5.0, [person])  # a static untrusted track on the site keeps it alive
+    sites.update(14.9, [])
+    assert sites.near((2.0, 1.0))
+    sites.update(15.1, [])  # nothing static there for 10 s: the site is forgotten
+    assert not sites.near((2.0, 1.0))
+    person.travel, person.recent = 0.6, 0b1111111111  # the tracker measures travel from where trust was taken
+    assert is_trusted(person, rule)
+    off = GhostSites(TrustRule(site_radius_m=0.0))
+    off.update(5.0, [ghost])
+    assert not off.near((2.0, 1.0))
