@@ -45,7 +45,8 @@ class TrustRule:
     every confirmed track (the behaviour before trust existed).
 
     Ghost sites (:class:`GhostSites`): a place where an untrusted track has stayed static (moved
-    less than ``min_travel_m``) for ``site_s`` seconds is a ghost site until ``site_life_s`` after
+    less than ``min_travel_m`` from its origin, where it was born or last lost its trust) for
+    ``site_s`` seconds is a ghost site until ``site_life_s`` after
     such a track was last seen there. A track within ``site_radius_m`` of a ghost site loses its
     trust and starts its travel anew from there: a trusted track that took over a ghost's
     detections when its person walked past (and stays on the ghost while the person walks on) is
@@ -90,7 +91,7 @@ def is_trusted(track: Track, rule: TrustRule) -> bool:
 def distrust(track: Track) -> None:
     """Take ``track``'s trust away: it must move ``min_travel_m`` from where it is now to regain it."""
     track.trusted = False
-    track.origin = np.array(track.position, float)
+    track.origin, track.origin_t = np.array(track.position, float), track.t
     track.travel = 0.0
 
 
@@ -109,7 +110,7 @@ class GhostSites:
         if r.site_radius_m <= 0:
             return
         for tr in tracks:
-            if not tr.trusted and tr.travel < r.min_travel_m and tr.t - tr.born >= r.site_s:
+            if not tr.trusted and tr.travel < r.min_travel_m and tr.t - tr.origin_t >= r.site_s:
                 d = np.hypot(*(self.sites[:, :2] - tr.position).T) if len(self.sites) else np.zeros(0)
                 if d.size and d.min() <= r.site_radius_m:
                     self.sites[np.argmin(d), 2] = t

@@ -43,6 +43,7 @@ class Track:
     recent: int = 1  # hits over the last HISTORY frames, bit 0 the latest
     born: float | None = None  # time of the first detection (default: ``t``)
     origin: np.ndarray | None = None  # position at birth (default: ``x[:2]``)
+    origin_t: float | None = None  # when ``origin`` was set (default: ``born``)
     travel: float = 0.0  # largest distance of the filtered position from ``origin``, m
     trusted: bool = False  # set once by ``targeting.is_trusted`` and kept
 
@@ -51,6 +52,8 @@ class Track:
             self.born = self.t
         if self.origin is None:
             self.origin = np.array(self.x[:2], float)
+        if self.origin_t is None:
+            self.origin_t = self.born
 
     @property
     def position(self) -> np.ndarray:

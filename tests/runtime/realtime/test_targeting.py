@@ -256,6 +256,7 @@ def test_a_track_that_stops_on_a_ghost_site_loses_trust_and_regains_it_by_walkin
     person.x[:2] = (1.9, 1.05)  # the person's track took over the ghost's detections
     sites.update(1.3, [person])
     assert not is_trusted(person, rule) and person.travel == 0.0
+    person.t = 5.0
     sites.update(5.0, [person])  # a static untrusted track on the site keeps it alive
     sites.update(14.9, [])
     assert sites.near((2.0, 1.0))
@@ -266,3 +267,23 @@ def test_a_track_that_stops_on_a_ghost_site_loses_trust_and_regains_it_by_walkin
     off = GhostSites(TrustRule(site_radius_m=0.0))
     off.update(5.0, [ghost])
     assert not off.near((2.0, 1.0))
+
+
+def test_a_person_walking_through_a_ghost_site_leaves_no_trail_of_sites():
+    """Walking at 1 m/s through a site: the track loses trust there and regains it 0.5 m beyond;
+    while untrusted it keeps moving, so it marks no site of its own (25 fps, 3 s)."""
+    rule = TrustRule()
+    sites = GhostSites(rule)
+    sites.sites = np.array([[1.0, 0.0, 0.0]])
+    tr = Track(id=1, x=np.array([0.0, 0.0, 1.0, 0.0]), P=np.eye(4), t=0.0, trusted=True, recent=(1 << 32) - 1)
+    trusted = []
+    for k in range(75):
+        t = 0.04 * k
+        tr.x[:2], tr.t = (t, 0.0), t
+        tr.travel = max(tr.travel, float(np.linalg.norm(tr.position - tr.origin)))
+        sites.update(t, [tr])
+        trusted.append(is_trusted(tr, rule))
+    assert len(sites.sites) == 1
+    lost = [0.04 * k for k, ok in enumerate(trusted) if not ok]
+    # untrusted from 0.6 m (the site's edge) until 0.5 m beyond its far edge (1.4 m): 1.3 s at 1 m/s
+    assert lost[0] == pytest.approx(0.6, abs=0.05) and lost[-1] == pytest.approx(1.86, abs=0.05)
