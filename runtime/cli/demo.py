@@ -20,7 +20,11 @@ uncertainty, and the commands written through the real driver to the emulator.
 Every processed frame is scored against the world's ground truth: detection
 misses and false alarms, the foot position error on the floor, and for each
 frame with a target whether the true head would be inside the PTZ frame for
-both zoom rules (the paper's and the calibrated one), and its width in pixels.
+both zoom rules (the paper's and the calibrated one), and its width in pixels;
+the share of target-frames aimed at no person; per person the share of their
+time in view with their face framed (face coverage); and the frames with
+someone in view but no target, by reason (tracks not yet trusted, tracks the
+PTZ cannot frame at p_contain, no track).
 
 Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line per
 frame), DIR/annotated.mp4 (the operator's view: the omni frame with sectors,
@@ -192,13 +196,23 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _report(s: dict, out) -> None:
+    import numpy as np
+
     c, f, d = s["containment"], s["face_px"], s["detection"]
     lat = s["latency_ms"]
     print(f"{s['frames']} frames at {s['fps']:.1f} fps ({s['stop_reason']}); latency frame -> PTZ bytes "
           f"p50 {lat['p50'] or float('nan'):.2f} ms, p99 {lat['p99'] or float('nan'):.2f} ms")
+    cov = s["face_coverage"]
     for rule, r in c["rules"].items():
-        print(f"  {rule:10s} zoom: head in frame {r['rate']:.4f} of {r['trials']} target-frames "
-              f"(p_contain {c['p_contain']}), median face {f['rules'][rule]['median']:.0f} px")
+        rf = r["rate_feasible"]
+        print(f"  {rule:10s} zoom: head in frame {r['rate']:.4f} of all {r['trials']} target-frames "
+              f"({rf if rf is not None else float('nan'):.4f} of the {r['feasible_trials']} where p_contain "
+              f"{c['p_contain']} was reachable; {r['rate_person_frames']:.4f} of the {c['person_frames']} frames "
+              f"with someone in view), median face {f['rules'][rule]['median']:.0f} px, face coverage "
+              f"{np.mean([q['rules'][rule] for q in cov['people']]) if cov['people'] else float('nan'):.3f}")
+    h = c["held"]
+    print(f"  target-frames on no person: {c['no_person_share'] or 0:.4f}; no target with someone in view: "
+          f"{h['untrusted']} frames untrusted, {h['unframeable']} unframeable, {h['no_track']} no track")
     fe = s["foot_error_m"]["rms"]
     print(f"  detection: miss rate {d['miss_rate'] or 0:.4f}, false alarms {d['false_alarm_rate'] or 0:.4f} "
           f"of detections; foot error RMS {fe if fe is not None else float('nan'):.3f} m")

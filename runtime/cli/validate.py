@@ -179,6 +179,11 @@ def run(args: argparse.Namespace) -> int:
           f"miss {r['miss_rate']:.4f} (x_m {r['x_m']:g})")
     print("containment: " + ", ".join(f"{c['rule']} {c['p_contain']:g}: {c['rate']:.3f}"
                                       for c in report["containment"]["curve"]))
+    f = report["framing"]
+    print(f"framing at p_contain {f['p_contain']:g} over all {f['trials']} fresh-rig trials: " + ", ".join(
+        f"{rule} {r['rate_all_trials']:.3f} (median face {r['face_px_median'] or float('nan'):.0f} px)"
+        for rule, r in f["rules"].items()) + f"; aimed at no person {f['no_person_share']:.3f}, "
+          f"no target {f['no_target_share']:.3f}")
     print(f"wrote {args.out}/report.json, report.md and maps in {report['seconds']:.1f} s")
     return 0
 
@@ -226,6 +231,7 @@ def _end_to_end(args, rig, scenario, scenario_name, counts, report, timing, stag
     report["containment"] = {**main, "curve": curve,
                              "meaning": "share of detected fresh-rig trials whose true head disc lies inside the "
                                         "foveal frame at the zoom the rule chose; curve: every rule and p_contain"}
+    report["framing"] = e.framing(rig, fresh, names, p_main)
     timing["statistics_s"] = time.perf_counter() - t
     positions_figure(rig, np.asarray(bench.positions), stage / "table1_positions.png")
     table1_figure({"fixed rig: detection and person sigmas": report["table1"],

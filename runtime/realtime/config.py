@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from runtime.errors import UsageError
 from runtime.settings import Names, check, setting
 
 
@@ -27,6 +28,20 @@ class LoopConfig:
                              flag="--dwell")
     dead_zone_sd: float = setting(1.0, "send a new pan/tilt only when it moves by more than K standard deviations",
                                   unit="a number of standard deviations", metavar="K", ge=0)
+    # when a track is trusted as a person and may get the PTZ (runtime.realtime.targeting.TrustRule)
+    trust_hits: int = setting(8, "trust a track once detected in at least M of the last --trust-window frames",
+                              unit="frames", metavar="M", ge=0)
+    trust_window: int = setting(10, "the window of --trust-hits", unit="frames", metavar="N", gt=0)
+    trust_age_s: float = setting(0.4, "trust a track only once it is at least S old", unit="seconds",
+                                 metavar="S", ge=0)
+    trust_travel_m: float = setting(0.5, "trust a track only once it has moved D from where it was born (a "
+                                    "static blob on empty floor never does; 0: trust static tracks)",
+                                    unit="metres", metavar="D", ge=0)
+    # ghost sites (TrustRule): where an untrusted track stayed static this long, tracks within the radius lose
+    # trust, until the site has not been seen for its life
+    trust_site_s: float = 1.0
+    trust_site_radius_m: float = 0.4
+    trust_site_life_s: float = 10.0
     adapt_every: int = 2
     home: tuple[float, float, float] = (0.0, 0.0, 1.0)
     status_every_s: float = 0.5
@@ -36,3 +51,6 @@ class LoopConfig:
 
     def __post_init__(self):
         check(self)
+        if self.trust_window > 32 or self.trust_hits > self.trust_window:
+            raise UsageError(f"--trust-hits / --trust-window: expected M <= N <= 32 frames, got "
+                             f"{self.trust_hits} of {self.trust_window}")

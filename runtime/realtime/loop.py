@@ -9,8 +9,9 @@ The control thread does only this, per frame (each stage timed):
    confirmed track's head predicted to when the PTZ will get there (tracking and latency
    uncertainty included): pan/tilt, their covariance and the zoom of both rules;
 3. ``track``: the tracker's bookkeeping (ids, hits, misses);
-4. ``aim``: the target chosen (:class:`~runtime.realtime.targeting.TargetSelector`) and its aim
-   taken from the call's result, the dead-zone test;
+4. ``aim``: the target chosen (:class:`~runtime.realtime.targeting.TargetSelector`; only trusted
+   tracks the PTZ can frame at ``p_contain``: else the loop holds and counts why, ``held_untrusted``
+   or ``held_unframeable``) and its aim taken from the call's result, the dead-zone test;
 5. ``send``: the PTZ command through the driver, unless it falls in the dead-zone;
 6. ``adapt``: the background update dispatched (it runs while the loop waits for the next frame).
 
@@ -27,6 +28,7 @@ the PTZ home, writes the summary and closes the outputs.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import signal
 import sys
@@ -46,7 +48,7 @@ from runtime.realtime.config import LoopConfig
 from runtime.realtime.control import Slew, control_step, pan_tilt_slew_s, perceive
 from runtime.realtime.drawing import OffPath
 from runtime.realtime.sources import Capture, Frame
-from runtime.realtime.targeting import TargetSelector, outside_dead_zone
+from runtime.realtime.targeting import TargetSelector, can_frame, outside_dead_zone, trust_rule
 from runtime.realtime.tracker import Tracker
 
 #: Timed stages: the control thread's, then the drawing thread's (``draw``: the hooks; ``log``).
@@ -146,12 +148,13 @@ class RealTimeLoop:
             raise ValueError("the fused control step aims at tracks matched again this frame: confirm must be >= 2")
         #: tracker slots in the compiled step; beyond them the tracks missing longest are dropped (counted)
         self.n_slots = 4 * detector.max_people
-        self.selector = TargetSelector(config.target, config.dwell_s)
+        self.selector = TargetSelector(config.target, config.dwell_s, trust_rule(config))
         self.timings = Timings()
         self.on_frame, self.on_control = on_frame, on_control
         self.log_path = log_path
         self.counts = {"frames": 0, "broken": 0, "wrong_size": 0, "commands_sent": 0, "dead_zone": 0,
-                       "no_target": 0, "invalid_geometry": 0, "deadline_overruns": 0, "tracks_over_slots": 0}
+                       "no_target": 0, "held_untrusted": 0, "held_unframeable": 0,
+                       "invalid_geometry": 0, "deadline_overruns": 0, "tracks_over_slots": 0}
         self.sent: tuple[float, float, float] | None = None
         self.sent_at: float | None = None
         self._arrive_at = 0.0
@@ -286,7 +289,7 @@ class RealTimeLoop:
         command = self._aim(frame, confirmed, c, aim_of)
         t = self._record("aim", t)
         if command is not None and command.sent:
-            self._send(command)
+            self._send(command, frame.stamp)
         t_sent = time.monotonic()
         self._record("send", t)
         if command is not None and command.sent:
@@ -299,6 +302,8 @@ class RealTimeLoop:
         if self.on_control is not None:
             record.update(self.on_control(record, frame) or {})
         t = t_sent
+        if command is None and self.selector.held is not None:
+            record["held"] = self.selector.held
         if self.counts["frames"] % self.cfg.adapt_every == 0:  # dispatched, not waited for
             self.bg, self.lines = update_background(self.detector, self.bg, x, self._theta_map, out.dets,
                                                     self.rig.detection.adapt_rate * self.cfg.adapt_every)
@@ -320,11 +325,12 @@ class RealTimeLoop:
             st["driver"] = {"connected": self.driver.connected, **self.driver.counters}
         return st
 
-    def _settled(self) -> bool:
-        """Whether the PTZ should have reached the last command by now (slew-time estimate)."""
+    def _settled(self, stamp: float) -> bool:
+        """Whether the PTZ should have reached the last command by the frame stamped ``stamp`` (slew-time
+        estimate on the frames' clock, so that ``--pace all`` runs are repeatable)."""
         if self.sent_at is None or self.sent is None:
             return False
-        return time.monotonic() >= self._arrive_at
+        return stamp >= self._arrive_at
 
     def _slew_time(self, target: tuple[float, float, float]) -> float:
         """Seconds the PTZ needs from the last command to ``target``: the device profile's command latency,
@@ -338,15 +344,24 @@ class RealTimeLoop:
         return self.profile.link.command_latency_s + max(pan_tilt, d_zoom * zp.seconds_full_range)
 
     def _aim(self, frame: Frame, tracks, c, aim_of: dict[int, int]) -> Command | None:
-        target = self.selector.choose(frame.stamp, tracks, self._settled())
+        aims: dict[int, tuple[int, Aim]] = {}
+
+        def framable(track) -> bool:
+            j = aim_of.get(track.id)
+            if j is None:  # not aimed at in the control step (not matched this frame)
+                return False
+            aims[track.id] = (j, jax.tree.map(lambda a: a[j], c.aims))
+            if not bool(aims[track.id][1].pointing.valid):
+                self.counts["invalid_geometry"] += 1
+            return can_frame(aims[track.id][1], self.cfg.zoom_rule)
+
+        target = self.selector.choose(frame.stamp, tracks, self._settled(frame.stamp), framable)
         if target is None:
             self.counts["no_target"] += 1
+            if self.selector.held is not None:
+                self.counts[f"held_{self.selector.held}"] += 1
             return None
-        j = aim_of[target.id]  # every confirmed track was aimed at in the control step
-        aimed: Aim = jax.tree.map(lambda a: a[j], c.aims)
-        if not bool(aimed.pointing.valid):
-            self.counts["invalid_geometry"] += 1
-            return None
+        j, aimed = aims[target.id]
         zooms = {rule: float(aimed.zooms[rule].zoom) for rule in ZOOM_RULES}
         pan, tilt, zoom = float(aimed.pointing.pan), float(aimed.pointing.tilt), zooms[self.cfg.zoom_rule]
         cov = aimed.covariance.cov
@@ -359,11 +374,12 @@ class RealTimeLoop:
                        sd_tilt=sd_tilt, sent=send, t_predicted=frame.stamp + float(c.lead[j]), aimed=aimed,
                        floor_sd=c.floor_sd[j])
 
-    def _send(self, cmd: Command) -> None:
+    def _send(self, cmd: Command, stamp: float) -> None:
+        """Hand ``cmd`` to the driver; the PTZ is expected there its slew time after the frame ``stamp``."""
         if self.driver is not None:
             self.driver.set_target(cmd.pan, cmd.tilt, cmd.zoom)
             time.sleep(0)  # hand the GIL to the driver's worker now, so that the bytes go out at once
-        self._arrive_at = time.monotonic() + self._slew_time((cmd.pan, cmd.tilt, cmd.zoom))
+        self._arrive_at = stamp + self._slew_time((cmd.pan, cmd.tilt, cmd.zoom))
         self.sent = (cmd.pan, cmd.tilt, cmd.zoom)
         self.sent_at = time.monotonic()
         self._sent_track = cmd.track
@@ -457,5 +473,6 @@ class RealTimeLoop:
             "captures": self.selector.captures,
             "config": {"zoom_rule": self.cfg.zoom_rule, "tracker": self.cfg.tracker, "target": self.cfg.target,
                        "dwell_s": self.cfg.dwell_s, "dead_zone_sd": self.cfg.dead_zone_sd,
+                       "trust": dataclasses.asdict(self.selector.trust),
                        "inputs": list(INPUT_NAMES)},
         }

@@ -7,6 +7,11 @@ detections are assigned to tracks by the optimal (Hungarian) assignment on the M
 gated at its chi-square(2) 99.9 % quantile. A track is confirmed after ``confirm`` hits and dropped
 after ``max_misses`` frames without a detection. The arithmetic (prediction, costs, assignment,
 update) is vectorised and jitted in :mod:`runtime.realtime.kalman`; this module keeps the bookkeeping.
+
+Each track also keeps what decides whether it is *trusted* as a person
+(:func:`runtime.realtime.targeting.is_trusted`): its hits over the last :data:`HISTORY` frames
+(``recent``, a bit mask, bit 0 the latest frame), when it was born, where (``origin``) and how far
+its filtered position has since moved from there (``travel``, m).
 """
 
 from __future__ import annotations
@@ -19,6 +24,8 @@ import numpy as np
 from runtime.realtime import kalman
 
 GATE = kalman.GATE
+#: Frames of hit/miss history a track keeps (``Track.recent``).
+HISTORY = 32
 
 
 @dataclass
@@ -34,6 +41,20 @@ class Track:
     captured: bool = False
     detection: int | None = None  # index of the detection it was updated with this frame
     extra: dict = field(default_factory=dict)
+    recent: int = 1  # hits over the last HISTORY frames, bit 0 the latest
+    born: float | None = None  # time of the first detection (default: ``t``)
+    origin: np.ndarray | None = None  # position at birth (default: ``x[:2]``)
+    origin_t: float | None = None  # when ``origin`` was set (default: ``born``)
+    travel: float = 0.0  # largest distance of the filtered position from ``origin``, m
+    trusted: bool = False  # set once by ``targeting.is_trusted`` and kept
+
+    def __post_init__(self):
+        if self.born is None:
+            self.born = self.t
+        if self.origin is None:
+            self.origin = np.array(self.x[:2], float)
+        if self.origin_t is None:
+            self.origin_t = self.born
 
     @property
     def position(self) -> np.ndarray:
@@ -108,10 +129,12 @@ class Tracker:
                 tr.hits += 1
                 tr.misses = 0
                 tr.detection = k
+                tr.travel = max(tr.travel, float(np.linalg.norm(tr.position - tr.origin)))
                 matched.add(k)
             else:
                 tr.misses += 1
                 tr.detection = None
+            tr.recent = ((tr.recent << 1) | (k >= 0)) & ((1 << HISTORY) - 1)
         self.tracks = [tr for tr in self.tracks if tr.misses <= self.max_misses]
         for k in range(len(z)):
             if k not in matched:

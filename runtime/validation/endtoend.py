@@ -22,6 +22,11 @@ an omni frame with fresh sensor noise and runs the detector on it.
 - Containment: for the fresh-rig trials, whether the true head disc lies in the foveal
   frame at the zoom each rule chooses for each p_contain, the detection aimed at through
   the aim pipeline (:func:`omnijax.aim_detection`), as the loop aims.
+- Framing (:func:`framing`): what a user of the PTZ gets from the same trials at the rig's
+  p_contain: the share of *all* trials with the head framed (a trial whose person was not
+  detected is not framed), the share in which the PTZ would be aimed at no person (the
+  person missed, another detection present), per position the share framed (the position's
+  "face coverage": each position is one person standing there) and the median face width.
 """
 
 from __future__ import annotations
@@ -492,6 +497,34 @@ def containment(rig: Rig, t: Trials, p_contain: tuple[float, ...] = P_CONTAIN) -
             out.append({"p_contain": p, "rule": rule, "rate": b["rate"], "trials": b["n"], "lower": b["lower"],
                         "upper": b["upper"], "predicted_mean": float(prob.mean()),
                         "face_px_median": float(np.median(face)), "zoom_median": float(np.median(zoom))})
+    return out
+
+
+def framing(rig: Rig, fresh: list[Trials], names: list[str], p_contain: float) -> dict:
+    """The report's ``framing`` (see the module docstring) over the fresh-rig trials ``fresh`` (one
+    :class:`Trials` per position ``names``) at ``p_contain``."""
+    found, others, inside, face = [], [], [], []
+    for t in fresh:
+        ins, px, _, _ = (np.asarray(a) for a in _contained(rig, t, p_contain))
+        f = np.asarray(t.det.found, bool)
+        found.append(f)
+        others.append(np.asarray(t.others) > 0)
+        inside.append(ins & f[:, None])
+        face.append(np.where(f[:, None], px, np.nan))
+    f_all, o_all, in_all, px_all = (np.concatenate(v) for v in (found, others, inside, face))
+    n = len(f_all)
+    out = {"p_contain": p_contain, "trials": n, "detected": int(f_all.sum()),
+           "no_person_share": float(np.mean(~f_all & o_all)), "no_target_share": float(np.mean(~f_all & ~o_all)),
+           "rules": {}, "face_coverage": []}
+    for i, rule in enumerate(ZOOM_RULES):
+        framed = in_all[:, i]
+        out["rules"][rule] = {"rate_all_trials": float(framed.mean()),
+                              "rate_detected": float(framed[f_all].mean()) if f_all.any() else None,
+                              "face_px_median": float(np.nanmedian(px_all[:, i])) if f_all.any() else None,
+                              "face_px_median_framed": float(np.median(px_all[framed, i])) if framed.any() else None}
+    for name, ins in zip(names, inside):
+        out["face_coverage"].append({"position": name, "trials": int(len(ins)),
+                                     "rules": {rule: float(ins[:, i].mean()) for i, rule in enumerate(ZOOM_RULES)}})
     return out
 
 

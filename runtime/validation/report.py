@@ -107,4 +107,24 @@ def report_markdown(report: dict) -> str:
     out += ["", "![containment](containment.png)", "",
             "`containment.png` shows how often the true head disc lay inside the foveal frame at each rule's zoom "
             "(fresh rig per trial) against the p_contain asked for, and the face pixels each rule buys.", ""]
+    f = report.get("framing")
+    if f is not None:
+        out += ["## Framing: what the PTZ delivers", "",
+                f"Over all {f['trials']} fresh-rig trials at p_contain = {f['p_contain']:g} (a trial whose person "
+                f"was not detected counts as not framed; {f['detected']} were detected). The PTZ would have been "
+                f"aimed at no person (the person missed, another detection present) in {f['no_person_share']:.4f} "
+                f"of them and had no target in {f['no_target_share']:.4f}.", "",
+                "| rule | framed, all trials | framed, detected trials | median face (px) |", "|---|---|---|---|"]
+        for rule, r in f["rules"].items():
+            det = "n/a" if r["rate_detected"] is None else f"{r['rate_detected']:.4f}"
+            px = "n/a" if r["face_px_median"] is None else f"{r['face_px_median']:.0f}"
+            out.append(f"| {rule} | {r['rate_all_trials']:.4f} | {det} | {px} |")
+        rules = list(f["rules"])
+        out += ["", "Face coverage: per position (one person standing there), the share of trials with the head "
+                "framed.", "", "| position | trials | " + " | ".join(rules) + " |",
+                "|---|---|" + "---|" * len(rules)]
+        for c in f["face_coverage"]:
+            out.append(f"| {c['position']} | {c['trials']} | " + " | ".join(f"{c['rules'][r]:.3f}" for r in rules)
+                       + " |")
+        out.append("")
     return "\n".join(out)

@@ -17,6 +17,12 @@ Per processed frame (an ``on_frame`` hook of :class:`~runtime.loop.RealTimeLoop`
   ``face_px``: the head's width in the foveal image at that zoom and the true distance. Each
   rule also reports the mean containment probability it predicted, and the rate over the
   trials where it could reach p_contain at all (its widest zoom sufficed).
+- what a user of the PTZ sees: ``rate`` is over *all* target-frames; ``no_person_share`` the
+  share of target-frames aimed at a track matching no person; ``rate_person_frames`` the frames
+  with the head framed over all frames with someone in the image (frames where the loop held, no
+  target, count as not framed; ``held`` counts them by the loop's reason: ``untrusted``,
+  ``unframeable``, or ``no_track``); ``face_coverage``: per person, the share of their frames in
+  the image in which the PTZ framed their head (each rule's zoom at the commanded pan/tilt).
 
 Trials are scored in batches of :data:`BATCH` and only counts and histograms are kept, so the
 memory stays flat however long the demo runs.
@@ -64,6 +70,11 @@ class DemoScorer:
         self.prob_sum, self.zoom_sum = np.zeros(nr), np.zeros(nr)
         self.face_hist, self.face_hist_in = np.zeros((nr, FACE_MAX + 1), int), np.zeros((nr, FACE_MAX + 1), int)
         self.p_contain = float(world.rig.p_contain)
+        n_people = self.positions.shape[1]
+        self.in_view = np.zeros(n_people, int)  # frames each person's foot is in the image
+        self.framed = np.zeros((nr, n_people), int)  # frames each person's head was framed, per rule
+        self.person_frames = 0  # frames with someone in the image
+        self.held = {"untrusted": 0, "unframeable": 0, "no_track": 0}  # of those, frames without a target
         self.last_target_error: float | None = None
 
     def __call__(self, record, frame, dets, z, tracks, command, *_) -> dict:
@@ -92,6 +103,10 @@ class DemoScorer:
         self.detections += len(z)
         self.false_alarms += fa
         out = {"truth": {"visible": n_vis, "missed": missed, "false_alarms": fa}}
+        self.in_view[inside] += 1
+        self.person_frames += bool(len(inside))
+        if command is None and len(inside):
+            self.held[record.get("held") or "no_track"] += 1
         if command is not None:
             out["truth"]["target_person"] = self._add_trial(frame.index, command, tracks)
             out["truth"]["target_error_m"] = self.last_target_error
@@ -119,7 +134,8 @@ class DemoScorer:
         aimed = command.aimed
         prob = (np.array([float(aimed.zooms[r].probability) for r in RULES]) if aimed is not None
                 else np.full(len(RULES), np.nan))
-        self.batch.append((command.pan, command.tilt, [command.zooms[r] for r in RULES], head, R_h, prob))
+        self.batch.append((command.pan, command.tilt, [command.zooms[r] for r in RULES], head, R_h, prob,
+                           -1 if person is None else person))
         if len(self.batch) == BATCH:
             self._score_batch()
         return person
@@ -129,10 +145,10 @@ class DemoScorer:
         if not n:
             return
         pad = self.batch + [self.batch[-1]] * (BATCH - n)
-        pan, tilt, zoom, head, R_h, prob = (np.array(v, float) for v in zip(*pad))
+        pan, tilt, zoom, head, R_h, prob, person = (np.array(v, float) for v in zip(*pad))
         inside, px = (np.asarray(a)[:n] for a in _trials(self.world.true_rig, jnp.asarray(pan), jnp.asarray(tilt),
                                                            jnp.asarray(zoom), jnp.asarray(head), jnp.asarray(R_h)))
-        zoom, prob = zoom[:n], prob[:n]
+        zoom, prob, person = zoom[:n], prob[:n], person[:n].astype(int)
         bins = np.clip(np.round(px), 0, FACE_MAX).astype(int)
         feasible = prob >= self.p_contain - 1e-9
         self.trials += n
@@ -144,6 +160,8 @@ class DemoScorer:
         for i in range(len(RULES)):
             self.face_hist[i] += np.bincount(bins[:, i], minlength=FACE_MAX + 1)
             self.face_hist_in[i] += np.bincount(bins[inside[:, i], i], minlength=FACE_MAX + 1)
+            hit = inside[:, i] & (person >= 0)
+            self.framed[i] += np.bincount(person[hit], minlength=self.framed.shape[1])
         self.batch.clear()
 
     def summary(self, p_contain: float, rule: str) -> dict:
@@ -159,7 +177,8 @@ class DemoScorer:
         self._score_batch()
         n = self.trials
         cont = {"p_contain": p_contain, "rule": rule, "rate": None, "trials": n, "no_person": self.no_person,
-                "rules": {}}
+                "no_person_share": self.no_person / n if n else None, "person_frames": self.person_frames,
+                "held": dict(self.held), "rules": {}}
         face = {"rule": rule, "median": None, "rules": {}}
         for i, r in enumerate(RULES):
             if not n:
@@ -168,13 +187,27 @@ class DemoScorer:
                 "rate": self.contained[i] / n, "contained": int(self.contained[i]), "trials": n,
                 "predicted_mean": self.prob_sum[i] / n, "zoom_mean": self.zoom_sum[i] / n,
                 "feasible_trials": int(self.feasible[i]),
-                "rate_feasible": self.feasible_contained[i] / self.feasible[i] if self.feasible[i] else None}
+                "rate_feasible": self.feasible_contained[i] / self.feasible[i] if self.feasible[i] else None,
+                "rate_person_frames": self.contained[i] / self.person_frames if self.person_frames else None}
             face["rules"][r] = {"median": _hist_median(self.face_hist[i]),
                                 "median_contained": _hist_median(self.face_hist_in[i])}
         if n:
             cont["rate"] = cont["rules"][rule]["rate"]
+            cont["rate_person_frames"] = cont["rules"][rule]["rate_person_frames"]
             face["median"] = face["rules"][rule]["median"]
-        return {"detection": det, "foot_error_m": foot, "containment": cont, "face_px": face}
+        return {"detection": det, "foot_error_m": foot, "containment": cont, "face_px": face,
+                "face_coverage": self._coverage(rule)}
+
+    def _coverage(self, rule: str) -> dict:
+        """Per person (seen in the image at all), the share of their frames in the image with their head
+        framed, per rule; ``mean`` and ``min`` over them for ``rule``."""
+        people = []
+        for p in np.nonzero(self.in_view)[0]:
+            people.append({"person": int(p), "frames_in_view": int(self.in_view[p]),
+                           "rules": {r: self.framed[i, p] / self.in_view[p] for i, r in enumerate(RULES)}})
+        shares = [q["rules"][rule] for q in people]
+        return {"rule": rule, "mean": float(np.mean(shares)) if shares else None,
+                "min": float(np.min(shares)) if shares else None, "people": people}
 
 
 def _hist_median(hist: np.ndarray) -> float | None:

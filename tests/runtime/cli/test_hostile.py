@@ -219,8 +219,10 @@ def test_opencv_says_nothing_before_the_one_line(tmp_path):
 def test_demo_lists_only_what_it_wrote(capsys):
     from runtime.cli.demo import _report
 
-    rule = {"rate": 1.0, "trials": 3}
-    summary = {"containment": {"p_contain": 0.99, "rules": {"calibrated": rule}},
+    rule = {"rate": 1.0, "trials": 3, "rate_feasible": 1.0, "feasible_trials": 3, "rate_person_frames": 1.0}
+    summary = {"containment": {"p_contain": 0.99, "rules": {"calibrated": rule}, "person_frames": 3,
+                               "no_person_share": 0.0, "held": {"untrusted": 0, "unframeable": 0, "no_track": 0}},
+               "face_coverage": {"people": [{"rules": {"calibrated": 1.0}}]},
                "face_px": {"rules": {"calibrated": {"median": 100.0}}}, "detection": {"miss_rate": 0.0,
                "false_alarm_rate": 0.0}, "latency_ms": {"p50": 1.0, "p99": 2.0}, "frames": 3, "fps": 25.0,
                "stop_reason": "source ended", "foot_error_m": {"rms": 0.1},

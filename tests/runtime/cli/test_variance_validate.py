@@ -94,6 +94,17 @@ def test_validate_quick_writes_report_and_maps(tmp_path):
     assert set(rep["containment"]) >= {"p_contain", "rule", "rate", "trials"}
     assert {(c["rule"], c["p_contain"]) for c in rep["containment"]["curve"]} >= {
         (r, p) for r in ("paper", "calibrated") for p in (0.9, 0.95, 0.99)}
+    f = rep["framing"]  # over all 64 fresh-rig trials: a missed person is not framed
+    assert f["trials"] == 64 and f["p_contain"] == rep["containment"]["p_contain"]
+    assert 0 <= f["no_person_share"] + f["no_target_share"] <= 1 - f["detected"] / 64 + 1e-12
+    main_rule = f["rules"][rep["containment"]["rule"]]
+    assert main_rule["rate_all_trials"] * 64 == pytest.approx(rep["containment"]["rate"] * f["detected"])
+    assert [c["position"] for c in f["face_coverage"]] == [f"P{k}" for k in range(1, 9)]
+    for rule, r in f["rules"].items():
+        assert r["face_px_median"] > 0
+        assert sum(c["rules"][rule] * c["trials"] for c in f["face_coverage"]) == pytest.approx(
+            r["rate_all_trials"] * 64)
+    assert "framing at p_contain" in run.stdout
     md = (out / "report.md").read_text()
     for name in ("table1.png", "table1_positions.png", "containment.png", "chroma.png", "ptz_pan.png"):
         assert f"]({name})" in md

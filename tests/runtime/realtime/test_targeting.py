@@ -7,8 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from runtime.realtime.targeting import TargetSelector, outside_dead_zone
-from runtime.realtime.tracker import Track
+from runtime.realtime.targeting import (
+    GhostSites,
+    TargetSelector,
+    TrustRule,
+    can_frame,
+    is_trusted,
+    outside_dead_zone,
+)
+from runtime.realtime.tracker import Track, Tracker
 
 
 def _tracks(*ids):
@@ -109,3 +116,174 @@ def test_pan_wraps_around():
     assert not outside_dead_zone(new, sent, 0.01, 0.01)
     assert outside_dead_zone(new, sent, 0.005, 0.01)
     assert not outside_dead_zone((3 * math.pi - 0.002, 0.0, 2.0), sent, 0.01, 0.01)  # a full turn on
+
+
+# ---------------------------------------------------------------------------------------------
+# Trust and framability
+
+
+def _run(tracker, positions, dt=0.04, hit=lambda k: True):
+    """Feed ``tracker`` one detection per frame at ``positions`` (K, 2) (skipped where ``hit(k)`` is
+    false, cov 0.05 m sd); returns the track that was born first."""
+    R = np.array([0.05**2 * np.eye(2)])
+    for k, xy in enumerate(positions):
+        z = np.asarray(xy, float)[None] if hit(k) else np.zeros((0, 2))
+        tracker.step(k * dt, z, R[: len(z)])
+    return min(tracker.tracks, key=lambda tr: tr.id)
+
+
+def test_a_static_track_on_empty_floor_is_never_trusted():
+    """A ghost: detected every frame for 20 s (500 frames) at one place with 5 cm noise (seed 0)."""
+    rng = np.random.default_rng(0)
+    tr = _run(Tracker(), np.array([2.0, 1.0]) + 0.05 * rng.standard_normal((500, 2)))
+    assert tr.hits >= 490 and tr.travel < 0.2
+    assert not is_trusted(tr, TrustRule())
+    assert is_trusted(tr, TrustRule(min_travel_m=0.0))  # with the travel test off, it would be
+
+
+def test_a_walking_person_is_trusted_once_they_have_moved():
+    """Walking at 1 m/s, detected every frame at 25 fps: trusted once 0.5 m from where the track was
+    born (the filter lags a little behind), not before."""
+    rule = TrustRule()  # 8 of 10 frames, 0.4 s, 0.5 m
+    kt, R = Tracker(), np.array([0.05**2 * np.eye(2)])
+    first = None
+    for k in range(40):
+        kt.step(k * 0.04, np.array([[0.04 * k, 0.0]]), R)
+        if first is None and is_trusted(kt.tracks[0], rule):
+            first = k
+    assert first is not None and 12 <= first <= 16, first
+
+
+def test_trust_needs_m_of_n_hits_and_the_minimum_age():
+    walk = np.c_[np.linspace(0.0, 2.0, 50), np.zeros(50)]
+    flicker = _run(Tracker(max_misses=3), walk, hit=lambda k: k % 2 == 0)  # detected in 5 of every 10 frames
+    assert flicker.travel > 1.0 and not is_trusted(flicker, TrustRule(hits=8, window=10))
+    assert is_trusted(flicker, TrustRule(hits=5, window=10))
+    young = _run(Tracker(), walk[:8])  # 0.28 s old
+    assert not is_trusted(young, TrustRule(min_age_s=0.4, min_travel_m=0.1))
+    assert is_trusted(young, TrustRule(min_age_s=0.2, min_travel_m=0.1))
+    with pytest.raises(ValueError, match="trust hits"):
+        TrustRule(hits=11, window=10)
+
+
+def test_stopping_keeps_trust():
+    rule = TrustRule()
+    kt = Tracker()
+    walk = np.c_[np.linspace(0.0, 1.5, 40), np.zeros(40)]
+    tr = _run(kt, walk)
+    assert is_trusted(tr, rule)
+    tr = _run(kt, np.repeat(walk[-1:], 200, axis=0))  # then stands for 8 s
+    assert tr.trusted and is_trusted(tr, rule)
+
+
+def test_untrusted_tracks_are_never_targeted_and_the_hold_says_why():
+    sel = TargetSelector("round-robin", dwell_s=1.0, trust=TrustRule())
+    tracks = _tracks(1, 2)
+    assert sel.choose(0.0, tracks, settled=False) is None and sel.held == "untrusted"
+    tracks[1].trusted = True
+    assert _ids(sel.choose(0.1, tracks, settled=False)) == 2 and sel.held is None
+    assert sel.choose(0.2, [], settled=False) is None and sel.held is None  # nobody: no hold
+
+
+def test_tracks_the_ptz_cannot_frame_are_skipped():
+    sel = TargetSelector("round-robin", dwell_s=1.0)
+    tracks = _tracks(1, 2, 3)
+    cannot = {1}
+
+    def framable(tr):
+        return tr.id not in cannot
+
+    assert _ids(sel.choose(0.0, tracks, settled=False, framable=framable)) == 2
+    cannot = {2}  # the target walks under the PTZ: the next one that can be framed
+    assert _ids(sel.choose(0.1, tracks, settled=False, framable=framable)) == 1
+    cannot = {1, 2, 3}
+    assert sel.choose(0.2, tracks, settled=False, framable=framable) is None and sel.held == "unframeable"
+    cannot = {1, 2}
+    assert _ids(sel.choose(0.3, tracks, settled=True, framable=framable)) == 3
+    assert _ids(sel.choose(0.4, tracks, settled=True, framable=framable)) == 3  # settled at 0.4
+    assert _ids(sel.choose(1.5, tracks, settled=True, framable=framable)) == 3  # dwelt, nobody else: stays
+    assert tracks[2].captured
+
+
+def test_can_frame_needs_valid_pointing_and_a_feasible_zoom():
+    from types import SimpleNamespace as NS
+
+    def aim(valid, feasible):
+        return NS(pointing=NS(valid=np.bool_(valid)), zooms={"calibrated": NS(feasible=np.bool_(feasible))})
+
+    assert can_frame(aim(True, True), "calibrated")
+    assert not can_frame(aim(False, True), "calibrated") and not can_frame(aim(True, False), "calibrated")
+
+
+def test_settling_runs_on_the_frames_clock_not_the_wall_clock(monkeypatch):
+    """The loop's settle estimate (when the PTZ reaches a command, which starts the dwell) is the frame's
+    stamp plus the slew time, whatever the wall clock says: a ``--pace all`` run chooses the same
+    targets however fast the machine is."""
+    from types import SimpleNamespace as NS
+
+    from runtime.ptz import default_profile
+    from runtime.realtime import loop as loop_module
+    from runtime.realtime.loop import Command, RealTimeLoop
+
+    wall = iter(np.random.default_rng(0).uniform(0, 1e6, 1000))
+    monkeypatch.setattr(loop_module, "time", NS(monotonic=lambda: float(next(wall)), sleep=lambda _s: None))
+    loop = RealTimeLoop.__new__(RealTimeLoop)
+    loop.driver, loop.profile, loop.sent, loop.sent_at = None, default_profile("visca"), None, None
+    loop.counts = {"commands_sent": 0}
+    assert not loop._settled(0.0)
+    loop._send(Command(track=1, pan=0.0, tilt=-0.5, zoom=1.0, zooms={}, sd_pan=0.01, sd_tilt=0.01, sent=True,
+                       t_predicted=0.0), stamp=0.0)
+    to = (math.pi / 2, -0.5, 1.0)
+    slew = loop._slew_time(to)
+    assert slew > 0.1
+    loop._send(Command(track=1, pan=to[0], tilt=to[1], zoom=to[2], zooms={}, sd_pan=0.01, sd_tilt=0.01, sent=True,
+                       t_predicted=10.0), stamp=10.0)
+    assert not loop._settled(10.0 + slew - 1e-6)
+    assert loop._settled(10.0 + slew)
+
+
+def test_a_track_that_stops_on_a_ghost_site_loses_trust_and_regains_it_by_walking_on():
+    """A ghost track static at (2, 1) for 1.2 s marks a ghost site; a trusted track that comes to it
+    loses its trust there (while the ghost is still seen, and for site_life_s after), and regains it
+    once min_travel_m beyond the site."""
+    rule = TrustRule(site_s=1.0, site_radius_m=0.4, site_life_s=10.0)
+    sites = GhostSites(rule)
+    ghost = Track(id=1, x=np.array([2.0, 1.0, 0, 0]), P=np.eye(4), t=0.0)
+    person = Track(id=2, x=np.array([0.0, 1.0, 0, 0]), P=np.eye(4), t=0.0, trusted=True)
+    ghost.t = person.t = 1.2
+    sites.update(1.2, [ghost, person])
+    assert sites.near((2.1, 1.1)) and not sites.near((2.5, 1.0)) and is_trusted(person, rule)
+    person.x[:2] = (1.9, 1.05)  # the person's track took over the ghost's detections
+    sites.update(1.3, [person])
+    assert not is_trusted(person, rule) and person.travel == 0.0
+    person.t = 5.0
+    sites.update(5.0, [person])  # a static untrusted track on the site keeps it alive
+    sites.update(14.9, [])
+    assert sites.near((2.0, 1.0))
+    sites.update(15.1, [])  # nothing static there for 10 s: the site is forgotten
+    assert not sites.near((2.0, 1.0))
+    person.travel, person.recent = 0.6, 0b1111111111  # the tracker measures travel from where trust was taken
+    assert is_trusted(person, rule)
+    off = GhostSites(TrustRule(site_radius_m=0.0))
+    off.update(5.0, [ghost])
+    assert not off.near((2.0, 1.0))
+
+
+def test_a_person_walking_through_a_ghost_site_leaves_no_trail_of_sites():
+    """Walking at 1 m/s through a site: the track loses trust there and regains it 0.5 m beyond;
+    while untrusted it keeps moving, so it marks no site of its own (25 fps, 3 s)."""
+    rule = TrustRule()
+    sites = GhostSites(rule)
+    sites.sites = np.array([[1.0, 0.0, 0.0]])
+    tr = Track(id=1, x=np.array([0.0, 0.0, 1.0, 0.0]), P=np.eye(4), t=0.0, trusted=True, recent=(1 << 32) - 1)
+    trusted = []
+    for k in range(75):
+        t = 0.04 * k
+        tr.x[:2], tr.t = (t, 0.0), t
+        tr.travel = max(tr.travel, float(np.linalg.norm(tr.position - tr.origin)))
+        sites.update(t, [tr])
+        trusted.append(is_trusted(tr, rule))
+    assert len(sites.sites) == 1
+    lost = [0.04 * k for k, ok in enumerate(trusted) if not ok]
+    # untrusted from 0.6 m (the site's edge) until 0.5 m beyond its far edge (1.4 m): 1.3 s at 1 m/s
+    assert lost[0] == pytest.approx(0.6, abs=0.05) and lost[-1] == pytest.approx(1.86, abs=0.05)
