@@ -144,6 +144,9 @@ def run(args: argparse.Namespace) -> int:
     if args.foot[0] > rim:
         raise UsageError(f"--foot: R_F = {args.foot[0]:g} px lies beyond the omni image's rim ({rim:g} px, omni.rim); "
                          "expected a radius where the mirror images the floor")
+    if args.sigma_rf is not None and args.sigma_rf > rim:
+        raise UsageError(f"--sigma-rf: {args.sigma_rf:g} px is larger than the omni image's rim ({rim:g} px, "
+                         "omni.rim); expected a detection's sigma, a few px")
     rep = variance_report(rig, args.foot[0], args.foot[1], args.method, args.sigma_rf, sigma_theta,
                           args.rel_tol, args.seed)
     print(dumps(rep) if args.json else _table(rep))

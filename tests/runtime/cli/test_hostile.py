@@ -340,6 +340,8 @@ def test_optimise_override_is_named_by_its_flag(capsys, tmp_path, flag, value):
 def test_variance_foot_beyond_the_rim_is_refused(capsys):
     code = main(["variance", "--config", PAPER, "--foot", "1e300", "0"])
     one_line(capsys, code, "--foot", "omni.rim")
+    code = main(["variance", "--config", PAPER, "--foot", "100", "0", "--sigma-rf", "1e300"])
+    one_line(capsys, code, "--sigma-rf", "omni.rim")
 
 
 def test_cache_dir_that_cannot_be_made_is_refused_before_work(capsys, tmp_path):
