@@ -116,6 +116,7 @@ def test_the_loop_adds_the_profiles_command_latency_to_the_slew_time():
     m = profile_mapping("visca")
     m["link"] = {**m.get("link", {}), "command_latency_s": 0.25}
     profile = parse_profile(m)
-    state = SimpleNamespace(profile=profile, sent=(0.0, 0.0, 1.0))
+    rates = (float(profile.pan.slew_deg_s()), float(profile.tilt.slew_deg_s()))
+    state = SimpleNamespace(profile=profile, sent=(0.0, 0.0, 1.0), _rates=rates)
     t = RealTimeLoop._slew_time(state, (math.radians(50.0), 0.0, 1.0))
-    assert t == pytest.approx(0.25 + 50.0 / profile.pan.max_speed_deg_s)
+    assert t == pytest.approx(0.25 + 50.0 / rates[0])

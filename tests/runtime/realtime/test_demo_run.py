@@ -185,14 +185,15 @@ def test_run_on_a_network_stream_reconnects_and_steers_a_visca_ip_ptz(demo_out, 
         proc = omnijax("run", stream.url, "--config", PAPER, "--ptz", f"visca-udp://127.0.0.1:{emulator.address[1]}",
                        "--out", str(out), "--no-video", "--quiet", "--background-frames", "30")
         deadline = time.monotonic() + 300
-        dropped = False
+        dropped_at = None
         while time.monotonic() < deadline and proc.poll() is None:
             logs = list(tmp_path.glob(".run.partial-*/log.jsonl"))
-            n = len(logs[0].read_text().splitlines()) if logs else 0
-            if n >= 30 and not dropped:
+            n = len(logs[0].read_text().splitlines()) if logs else 0  # the log is flushed in blocks: n jumps
+            if n >= 30 and dropped_at is None:
                 stream.drop(0.5)
-                dropped = True
-            if n >= 120:
+                dropped_at = time.monotonic()
+            # SIGTERM only well after the drop: 0.5 s down, then the reconnect back-off and reopening
+            if dropped_at is not None and time.monotonic() - dropped_at > 4.0 and n >= 120:
                 proc.send_signal(signal.SIGTERM)
                 break
             time.sleep(0.05)
