@@ -135,7 +135,7 @@ def _run_detector(args) -> int:
             build_s = time.perf_counter() - t_build
             r_range = polar_range(rig)
             counts, t_detect, n = [], 0.0, 0
-            for frame in tqdm(frames, desc="detect", unit="frame", initial=n_bg):
+            for frame in tqdm(frames, desc="detect", unit="frame", initial=n_bg, disable=None, leave=False):
                 index = n_bg + n
                 x = jnp.asarray(frame)
                 t0 = time.perf_counter()
@@ -211,7 +211,8 @@ def _run_change_only(args) -> int:
         inter = union = ours_px = mog_px = agree = total = 0
         per_frame = []
         with staged_output(args.out) as stage:
-            for n, frame in enumerate(tqdm(frames, desc="change", unit="frame", initial=n_bg)):
+            bar = tqdm(frames, desc="change", unit="frame", initial=n_bg, disable=None, leave=False)
+            for n, frame in enumerate(bar):
                 x = jnp.asarray(frame)
                 ours = np.asarray(step(x, bg))
                 theirs = mog2.apply(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)) == 255  # 127 = MOG2's shadow
