@@ -121,9 +121,9 @@ def connect_timeout(url: str) -> float:
     return 30.0 if url.lower().startswith("onvif://") else 5.0
 
 
-def _connect(args):
-    """The connected driver for ``--ptz`` (one line, exit 2 for bad input; ``None`` after printing why
-    no camera answered)."""
+def _connect(args, profile=None):
+    """The connected driver for ``--ptz`` with ``profile`` (default: ``--ptz-profile`` or the URL's
+    protocol's) (one line, exit 2 for bad input; ``None`` after printing why no camera answered)."""
     from runtime.cli._options import load_ptz_profile
     from runtime.errors import UsageError
     from runtime.ptz import PtzError, PtzPortError, make_driver
@@ -135,7 +135,8 @@ def _connect(args):
         args.timeout = connect_timeout(args.ptz)
     if not args.timeout > 0:
         raise UsageError(f"--timeout: expected a positive number of seconds, got {args.timeout}")
-    profile = load_ptz_profile(args.ptz_profile, args.protocol or required_protocol(args.ptz))
+    if profile is None:
+        profile = load_ptz_profile(args.ptz_profile, args.protocol or required_protocol(args.ptz))
     try:
         driver = make_driver(args.ptz, profile)
         driver.connect(timeout=args.timeout)
@@ -218,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
     from runtime.cli._options import load_ptz_profile
     from runtime.errors import UsageError
     from runtime.output import dumps
-    from runtime.ptz import PtzError, PtzPortError, make_driver
+    from runtime.ptz import PtzError
     from runtime.ptz.transports import required_protocol
 
     if args.ptz is None:
@@ -236,21 +237,13 @@ def run(args: argparse.Namespace) -> int:
                              f"got {args.tilt_deg:g}")
         if not args.zoom > 0:
             raise UsageError(f"--zoom: expected a zoom factor > 0, got {args.zoom:g}")
-    if args.timeout is None:
-        args.timeout = connect_timeout(args.ptz)
-    for flag, value in (("--wait", args.wait), ("--timeout", args.timeout)):
-        if not value > 0:
-            raise UsageError(f"{flag}: expected a positive number of seconds, got {value}")
+    if not args.wait > 0:
+        raise UsageError(f"--wait: expected a positive number of seconds, got {args.wait}")
 
     shown = redact(args.ptz)  # a password in an onvif:// URL is never printed
     report: dict = {"port": shown, "profile": profile.name, "protocol": profile.protocol}
-    try:
-        driver = make_driver(args.ptz, profile)
-        driver.connect(timeout=args.timeout)
-    except PtzPortError as exc:
-        raise UsageError(f"--ptz: {exc}") from None
-    except PtzError as exc:
-        print(f"omnijax ptz: {exc}", file=sys.stderr)
+    driver = _connect(args, profile)
+    if driver is None:
         return 1
     try:
         reached = True
