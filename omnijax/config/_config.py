@@ -153,6 +153,11 @@ class Detection(eqx.Module):
     sigma_extra_r_f: Float[Array, ""] = eqx.field(default=0.0, converter=jnp.asarray)
     sigma_gain_theta_f: Float[Array, ""] = eqx.field(default=1.0, converter=jnp.asarray)
     sigma_extra_theta_f: Float[Array, ""] = eqx.field(default=0.0, converter=jnp.asarray)
+    background_seconds: float = eqx.field(static=True, default=10.0)
+    recent_s: float = eqx.field(static=True, default=0.4)
+    ghost_s: float = eqx.field(static=True, default=0.3)
+    ghost_edge: float = eqx.field(static=True, default=4.0)
+    absorb_s: float = eqx.field(static=True, default=60.0)
 
 
 class Room(eqx.Module):
@@ -396,8 +401,21 @@ class DetectionSection(Section):
     min_floor_radius: Metres = Field(0.3, description="floor radius under the camera left out, m")
     r_max: Pixels | None = Field(None, description="outer radius of the polar sampling, px (default: room)")
     max_people: Annotated[int, Field(ge=1, le=64)] = 8
-    background_frames: Annotated[int, Field(ge=3, le=1000)] = 30
-    adapt_rate: Annotated[float, Field(ge=0, lt=1)] = Field(0.02, description="background adaptation")
+    background_frames: Annotated[int, Field(ge=3, le=1000)] = Field(
+        30, description="frames the background is learnt from, spread over background_seconds")
+    background_seconds: Annotated[float, within(0.0, 3600.0, "seconds", why="an hour")] = Field(
+        10.0, description="span of the learning frames, s (0: consecutive frames)")
+    adapt_rate: Annotated[float, Field(ge=0, lt=1)] = Field(
+        0.02, description="drift: update rate per frame of unchanged pixels outside every detection")
+    recent_s: Annotated[float, within(0.0, 60.0, "seconds", open_low=True, why="a minute")] = Field(
+        0.4, description="time constant of the short-term average a repaired pixel takes, s")
+    ghost_s: Annotated[float, within(0.0, 60.0, "seconds", why="a minute")] = Field(
+        0.3, description="a static detection with no object edge this long is a ghost and re-learnt, s")
+    ghost_edge: Annotated[float, within(0.0, 1e6, "a mean d^2", open_low=True,
+                                        why="an edge so strong no object has it")] = Field(
+        4.0, description="object-edge test: mean d^2 across the sector's edge below this is no edge")
+    absorb_s: Annotated[float, within(0.0, 86400.0, "seconds", open_low=True, why="a day")] = Field(
+        60.0, description="an object standing still with no trusted track is absorbed after this, s")
     foot_mc_profiles: Annotated[int, Field(ge=16, le=4096)] = Field(
         256, description="Monte Carlo profiles per table cell of sigma_r_f")
 
@@ -651,6 +669,8 @@ def parse_rig(
         sigma_gain_r_f=_a(de.sigma_gain_r_f), sigma_extra_r_f=_a(de.sigma_extra_r_f),
         sigma_gain_theta_f=_a(de.sigma_gain_theta_f),
         sigma_extra_theta_f=_a(math.radians(de.sigma_extra_theta_f_deg)),
+        background_seconds=de.background_seconds, recent_s=de.recent_s, ghost_s=de.ghost_s,
+        ghost_edge=de.ghost_edge, absorb_s=de.absorb_s,
     )
     room = Room(outline=_a(f.room.outline), exclude=tuple(_a(p) for p in f.room.exclude))
     return Rig(

@@ -1,5 +1,16 @@
-"""The people detector: chromaticity, change measure, background, polar indexing, the foot (eq 5-12)."""
+"""The people detector: chromaticity, change measure, background and its life, polar indexing, the foot (eq 5-12)."""
 
+from ._background import (
+    CHANGED as CHANGED,
+    BackgroundLife as BackgroundLife,
+    PixelPolar as PixelPolar,
+    detection_regions as detection_regions,
+    ghost_evidence as ghost_evidence,
+    learned_share as learned_share,
+    live_step as live_step,
+    pixel_polar as pixel_polar,
+    start_life as start_life,
+)
 from ._change import (
     MEASURES as MEASURES,
     Background as Background,

@@ -3,7 +3,8 @@
 Per processed frame (an ``on_frame`` hook of :class:`~runtime.loop.RealTimeLoop`):
 
 - detection: detections and the people whose foot is inside the image are matched one to one
-  (Hungarian, floor distance gated at ``gate_m``). A *miss* is a person whose foot end is
+  (:func:`runtime.validation.perception.match_feet`: Hungarian on the floor distance among the pairs
+  within ``gate_m``). A *miss* is a person whose foot end is
   visible (not hidden by furniture or another person) and who got no detection; a *false
   alarm* is a detection matching nobody. ``miss_rate`` = misses / visible person-frames;
   ``false_alarm_rate`` = false alarms / detections (also given per frame). ``foot_error_m``:
@@ -34,9 +35,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from omnijax.world import head_in_view
+from runtime.validation.perception import match_feet
 from omnijax.zoom import ZOOM_RULES as RULES
 
 #: Trials scored at once (one compiled shape); face widths are histogrammed in 1 px bins up to FACE_MAX.
@@ -87,14 +88,10 @@ class DemoScorer:
         visible = np.asarray(truth.foot_visible)
         z = np.asarray(z).reshape(-1, 2)
         matched = set()
-        if len(z) and len(inside):
-            d = np.linalg.norm(z[:, None] - foot[inside][None], axis=-1)
-            rows, cols = linear_sum_assignment(d)
-            for r, c in zip(rows, cols):
-                if d[r, c] <= self.gate_m:
-                    matched.add(int(inside[c]))
-                    self.foot_sq_sum += float(d[r, c]) ** 2
-                    self.matched += 1
+        for _r, c, dist in match_feet(z, foot[inside], self.gate_m):
+            matched.add(int(inside[c]))
+            self.foot_sq_sum += dist**2
+            self.matched += 1
         n_vis = int(visible[inside].sum())
         missed = sum(1 for j in inside if visible[j] and j not in matched)
         fa = len(z) - len(matched)

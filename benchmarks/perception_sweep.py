@@ -1,0 +1,180 @@
+"""Perception against the synthetic world's truth over many scenes and seeds: misses, false alarms, their
+causes, NEES per range band; the worst and the median seed per scene.
+
+Two ways in:
+
+- ``sweep``: renders each (scene, seed) in this process and runs ``omnijax detect``'s own pipeline on
+  the frames (:func:`runtime.realtime.perception.detect_frames`, its defaults: what ``omnijax detect``
+  does to the same frames read from a lossless video), scoring every processed frame;
+- ``folders R:D ...``: scores ``omnijax render`` output R against ``omnijax detect`` output D.
+
+Scoring and causes: :mod:`runtime.validation.perception` (docs/detection.md, "Per-cause figures").
+
+Run:
+
+    .venv/bin/python benchmarks/perception_sweep.py sweep --scenes three_people six_people \\
+        --seeds 5000-5009 --frames 600 --json out/sweep.json
+    .venv/bin/python benchmarks/perception_sweep.py folders R:D
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import jax
+
+jax.config.update("jax_enable_x64", True)  # as the omnijax command runs
+import numpy as np
+from tqdm import tqdm
+
+from omnijax import detection_sigmas, floor_from_detections
+from runtime.validation.perception import FA_CAUSES, MISS_CAUSES, History, PerceptionScore
+
+
+def seeds_arg(text: str) -> list[int]:
+    out = []
+    for part in text.split(","):
+        a, _, b = part.partition("-")
+        out += list(range(int(a), int(b) + 1)) if b else [int(a)]
+    return out
+
+
+def floor_and_sigmas(rig, people: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    if not people:
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    r = np.array([p["r_f"] for p in people])
+    t = np.array([p["theta_f"] for p in people])
+    s_r = np.array([p.get("detector_sigma_r_f", p["sigma_r_f"]) for p in people])
+    s_t = np.array([p.get("detector_sigma_theta_f", p["sigma_theta_f"]) for p in people])
+    z, _ = floor_from_detections(rig, r, t, s_r, s_t)
+    sr, st = detection_sigmas(rig, s_r, s_t)
+    return np.asarray(z), np.stack([np.asarray(sr), np.asarray(st)], -1)
+
+
+def score_lines(rig, truth_lines: list[dict], world: dict, det_lines: list[dict], learning_frames,
+                moved_furniture=()) -> dict:
+    history = History.from_truth_lines(truth_lines, world, learning_frames, moved_furniture)
+    by_frame = {t["frame"]: t for t in truth_lines}
+    score = PerceptionScore()
+    for d in det_lines:
+        z, sig = floor_and_sigmas(rig, d["people"])
+        score.add_frame(d["frame"], by_frame[d["frame"]], d["people"], z, sig, history)
+    return score.summary()
+
+
+def read_jsonl(path: Path) -> list[dict]:
+    with path.open() as f:
+        return [json.loads(line) for line in f]
+
+
+def folders(args) -> list[dict]:
+    from runtime.files import load_rig
+
+    rows = []
+    for pair in args.pairs:
+        r, d = (Path(p) for p in pair.split(":", 1))
+        world = json.loads((r / "world.json").read_text())
+        summary = json.loads((d / "summary.json").read_text())
+        rig = load_rig(summary["config"])
+        learning = summary.get("learning_frames", list(range(summary.get("background_frames", 30))))
+        s = score_lines(rig, read_jsonl(r / "truth.jsonl"), world, read_jsonl(d / "detections.jsonl"), learning)
+        rows.append({"scene": world["scenario"], "seed": world["seed"], **s})
+    return rows
+
+
+def sweep(args) -> list[dict]:
+    from omnijax.world import build_world
+    from runtime.files import load_scenario
+    from runtime.realtime.perception import detect_frames
+    from runtime.validation.truth import truth_line, world_summary
+
+    rows = []
+    jobs = [(s, k) for s in args.scenes for k in args.seeds]
+    bar = tqdm(jobs, desc="sweep", unit="run", disable=None)
+    for scene, seed in bar:
+        bar.set_postfix_str(f"{scene} {seed}")
+        rig, sc = load_scenario(Path("configs/scenarios") / f"{scene}.toml")
+        world = build_world(rig, sc, seed, n_frames=args.frames)
+        t0 = time.perf_counter()
+        truth_lines, det_lines = [], []
+
+        def frames():
+            for t in range(args.frames):
+                f = world.frame(t)
+                truth_lines.append(truth_line(jax.device_get(f.truth)))
+                yield np.asarray(f.image)
+
+        result = detect_frames(rig, frames(), fps=float(sc.fps))
+        for item in result:
+            det_lines.append({"frame": item.index, "people": item.people})
+        s = score_lines(rig, truth_lines, world_summary(world), det_lines, result.learning_frames,
+                        getattr(world, "moved_furniture", ()))
+        rows.append({"scene": scene, "seed": seed, "seconds": time.perf_counter() - t0,
+                     "learned_share": result.learned_share, **s})
+    return rows
+
+
+def table(rows: list[dict]) -> str:
+    head = ("| scene | seed | miss | false alarms | NEES r_f | P(>6.63) | NEES theta_f | P(>6.63) | FA causes | "
+            "miss causes |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | --- |")
+    out = [head]
+    for r in rows:
+        n = r["nees"]["all"]
+        fa = " ".join(f"{k}:{v}" for k, v in r["fa_causes"].items() if v)
+        mi = " ".join(f"{k}:{v}" for k, v in r["miss_causes"].items() if v)
+        out.append(f"| {r['scene']} | {r['seed']} | {_f(r['miss_rate'])} | {_f(r['false_alarm_rate'])} | "
+                   f"{_f(n.get('r_f_mean'), 2)} | {_f(n.get('r_f_over_6_63'))} | {_f(n.get('theta_f_mean'), 2)} | "
+                   f"{_f(n.get('theta_f_over_6_63'))} | {fa} | {mi} |")
+    return "\n".join(out)
+
+
+def worst_and_median(rows: list[dict]) -> str:
+    out = ["| scene | seeds | miss worst (seed) | miss median | FA worst (seed) | FA median | "
+           "NEES r_f median | NEES theta_f median |", "| --- | ---: | --- | ---: | --- | ---: | ---: | ---: |"]
+    for scene in dict.fromkeys(r["scene"] for r in rows):
+        rs = [r for r in rows if r["scene"] == scene]
+        m = max(rs, key=lambda r: r["miss_rate"] or 0)
+        f = max(rs, key=lambda r: r["false_alarm_rate"] or 0)
+        out.append(f"| {scene} | {len(rs)} | {_f(m['miss_rate'])} ({m['seed']}) | "
+                   f"{_f(np.median([r['miss_rate'] or 0 for r in rs]))} | {_f(f['false_alarm_rate'])} ({f['seed']}) | "
+                   f"{_f(np.median([r['false_alarm_rate'] or 0 for r in rs]))} | "
+                   f"{_f(np.median([r['nees']['all'].get('r_f_mean', np.nan) for r in rs]), 2)} | "
+                   f"{_f(np.median([r['nees']['all'].get('theta_f_mean', np.nan) for r in rs]), 2)} |")
+    return "\n".join(out)
+
+
+def _f(v, digits: int = 3) -> str:
+    return "-" if v is None or (isinstance(v, float) and np.isnan(v)) else f"{v:.{digits}f}"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="mode", required=True)
+    s = sub.add_parser("sweep", help="render and detect in this process, many scenes and seeds")
+    s.add_argument("--scenes", nargs="+", default=["three_people", "six_people"])
+    s.add_argument("--seeds", type=seeds_arg, default=seeds_arg("5000-5009"), help="e.g. 5000-5009 or 1,2,7")
+    s.add_argument("--frames", type=int, default=600)
+    f = sub.add_parser("folders", help="score omnijax render + omnijax detect outputs")
+    f.add_argument("pairs", nargs="+", metavar="RENDER:DETECT")
+    for p in (s, f):
+        p.add_argument("--json", type=Path, help="write every row here")
+    args = ap.parse_args()
+    rows = sweep(args) if args.mode == "sweep" else folders(args)
+    print(table(rows))
+    print()
+    print(worst_and_median(rows))
+    print("\nFA causes:", ", ".join(FA_CAUSES), "| miss causes:", ", ".join(MISS_CAUSES))
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(rows, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,246 @@
+"""Perception scored against the synthetic world's truth: misses, false alarms and their causes, NEES.
+
+What ``benchmarks/perception_sweep.py`` reports for every (scene, seed), from the lines ``omnijax
+render`` writes (``truth.jsonl``, ``world.json``) and the lines ``omnijax detect`` writes
+(``detections.jsonl``), or the same objects made in one process.
+
+Per frame, detections and the people whose foot is in the image are matched one to one (Hungarian
+on the floor distance between the detection's foot, eq 1 in the configured rig, and the true foot,
+gated at :data:`GATE_M`; the rule of the demo's scorer, :func:`match_feet`). A *miss* is a person
+whose foot end is visible and who got no detection; a *false alarm* a detection matching nobody.
+
+Each false alarm and miss gets one cause, the first that applies (the classifier knows the truth,
+not the detector's state, so it is approximate; docs/detection.md, "Per-cause figures"):
+
+false alarms
+  ``fragment``         a matched detection of a person stands within :data:`FRAGMENT_M` (a second
+                       detection of one person: a split sector, a shadow, the body beyond the model)
+  ``ghost_learning``   a person's foot was within :data:`SITE_M` in at least a fifth of the frames the
+                       background was learnt from
+  ``ghost_pause``      a person stood still within :data:`SITE_M` for :data:`PAUSE_S` or more
+                       earlier and has gone
+  ``moved_object``     within :data:`SITE_M` of a piece of furniture that moved (either place)
+  ``far_field``        beyond :data:`FAR_M` from the camera axis
+  ``other``
+misses
+  ``merged``           another person within :data:`SAME_SECTOR_RAD` of azimuth was detected (two
+                       people in one sector, one detection)
+  ``ghost_sector``     a false alarm's sector covers the person's azimuth (merged with a ghost)
+  ``absorbed_standing`` the person has stood still for :data:`PAUSE_S` or more
+  ``floor_coloured``   the person is dressed close to the floor's colour
+  ``far_field``        the foot beyond :data:`FAR_M`
+  ``other``
+
+NEES per matched detection and coordinate: ``(error / sigma)^2`` with the sigma rule's sigma
+(chi-square(1): mean 1, P(> 6.63) = 0.01), overall and per band of the true foot's floor radius
+(:data:`RANGE_BANDS`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+#: Matching gate on the floor (m), as the demo's scorer.
+GATE_M = 0.5
+#: Cause classifier: a second detection of one person within FRAGMENT_M (m); a person's place
+#: within SITE_M (m); a pause of PAUSE_S (s) or more; two people within SAME_SECTOR_RAD (rad) of
+#: azimuth share a sector; the far field starts FAR_M (m) from the camera axis.
+FRAGMENT_M, SITE_M, PAUSE_S, SAME_SECTOR_RAD, FAR_M = 1.0, 0.6, 1.0, 0.35, 2.7
+#: A person counts as standing at a place in the learning frames when there in this share of them.
+LEARNING_SHARE = 0.2
+#: Bands of the true foot's floor radius (m) for the NEES.
+RANGE_BANDS = (0.0, 1.5, 2.5, 3.5, math.inf)
+#: The chi-square(1) 99 % point: a Gaussian coordinate's NEES exceeds it with probability 0.01.
+NEES_99 = 6.63
+FA_CAUSES = ("fragment", "ghost_learning", "ghost_pause", "moved_object", "far_field", "other")
+MISS_CAUSES = ("merged", "ghost_sector", "absorbed_standing", "floor_coloured", "far_field", "other")
+
+
+def match_feet(z: np.ndarray, foot: np.ndarray, gate_m: float = GATE_M) -> list[tuple[int, int, float]]:
+    """One-to-one matches (detection, person, distance m) of detections at floor points ``z`` (K, 2) to
+    true feet ``foot`` (P, 2): the Hungarian assignment on the floor distance among the pairs within
+    ``gate_m`` (gated first: an assignment of least total distance over all pairs may pair a detection
+    with a far person and leave the near one)."""
+    z, foot = np.asarray(z, float).reshape(-1, 2), np.asarray(foot, float).reshape(-1, 2)
+    if not len(z) or not len(foot):
+        return []
+    d = np.linalg.norm(z[:, None] - foot[None], axis=-1)
+    rows, cols = linear_sum_assignment(np.where(d <= gate_m, d, 1e6))
+    return [(int(r), int(c), float(d[r, c])) for r, c in zip(rows, cols) if d[r, c] <= gate_m]
+
+
+def wrap_pi(a):
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+@dataclass
+class History:
+    """What the cause classifier knows of the world: every frame's feet (t, p, 2), who moves (t, p),
+    who is dressed like the floor (p,), the frames the background was learnt from, the fps, and the
+    furniture that moved (footprint centres, m, both places)."""
+
+    feet: np.ndarray
+    moving: np.ndarray
+    floor_like: np.ndarray
+    learning_frames: np.ndarray
+    fps: float
+    moved_furniture: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+    @classmethod
+    def from_truth_lines(cls, lines: list[dict], world: dict, learning_frames, moved_furniture=()) -> History:
+        n = max(t["frame"] for t in lines) + 1
+        p = len(world["people"])
+        feet, moving = np.full((n, p, 2), np.nan), np.zeros((n, p), bool)
+        for t in lines:
+            for q in t["persons"]:
+                feet[t["frame"], q["id"]] = q["foot_m"]
+                moving[t["frame"], q["id"]] = q["moving"]
+        return cls(feet=feet, moving=moving, floor_like=np.array([q["floor_like"] for q in world["people"]], bool),
+                   learning_frames=np.asarray(learning_frames, int), fps=float(world["fps"]),
+                   moved_furniture=np.asarray(moved_furniture, float).reshape(-1, 2))
+
+    def still_for(self, frame: int, person: int) -> float:
+        """Seconds person has stood still up to ``frame`` (0 if moving at it)."""
+        run = 0
+        while frame - run >= 0 and not self.moving[frame - run, person]:
+            run += 1
+        return run / self.fps
+
+    def learnt_here(self, xy) -> bool:
+        f = self.learning_frames
+        if not f.size:
+            return False
+        d = np.linalg.norm(self.feet[f] - np.asarray(xy)[None, None], axis=-1)  # (n, p)
+        return bool(np.any(np.mean(d <= SITE_M, axis=0) >= LEARNING_SHARE))
+
+    def paused_here_before(self, frame: int, xy) -> bool:
+        """Someone stood still within SITE_M of ``xy`` for PAUSE_S or more before ``frame`` and is gone now."""
+        start = int(self.learning_frames.max()) + 1 if self.learning_frames.size else 0
+        seg = slice(start, frame)
+        near = np.linalg.norm(self.feet[seg] - np.asarray(xy)[None, None], axis=-1) <= SITE_M
+        still = near & ~self.moving[seg]
+        need = int(round(PAUSE_S * self.fps))
+        for p in range(still.shape[1]):
+            now_away = np.linalg.norm(self.feet[frame, p] - xy) > SITE_M
+            if now_away and _longest_run(still[:, p]) >= need:
+                return True
+        return False
+
+
+def _longest_run(b: np.ndarray) -> int:
+    best = run = 0
+    for v in b:
+        run = run + 1 if v else 0
+        best = max(best, run)
+    return best
+
+
+@dataclass
+class PerceptionScore:
+    """Counts, causes and NEES over the frames scored (see the module docstring)."""
+
+    visible: int = 0
+    misses: int = 0
+    detections: int = 0
+    false_alarms: int = 0
+    frames: int = 0
+    fa_causes: Counter = field(default_factory=Counter)
+    miss_causes: Counter = field(default_factory=Counter)
+    nees: list = field(default_factory=list)  # (R_m, nees_r, nees_theta)
+
+    def add_frame(self, frame: int, truth: dict, people: list[dict], z: np.ndarray, sigmas: np.ndarray,
+                  history: History | None) -> dict:
+        """Score one frame: ``truth`` a truth line, ``people`` the detections (``r_f``, ``theta_f``,
+        ``theta_l``, ``theta_r``), ``z`` their floor points (K, 2), ``sigmas`` their sigma-rule
+        sigmas (K, 2: r_f px, theta_f rad). Returns the frame's misses and false alarms with causes."""
+        self.frames += 1
+        persons = [q for q in truth["persons"] if q["in_image"]]
+        foot = np.array([q["foot_m"] for q in persons]).reshape(-1, 2)
+        pairs = match_feet(z, foot)
+        det_of = {c: r for r, c, _ in pairs}
+        person_of = {r: c for r, c, _ in pairs}
+        for r, c, _ in pairs:
+            q = persons[c]
+            e_r = people[r]["r_f"] - q["r_f"]
+            e_t = float(wrap_pi(people[r]["theta_f"] - q["theta_f"]))
+            self.nees.append((float(np.hypot(*q["foot_m"])), (e_r / sigmas[r, 0]) ** 2, (e_t / sigmas[r, 1]) ** 2))
+        out = {"missed": [], "false": []}
+        unmatched = [k for k in range(len(people)) if k not in person_of]
+        for c, q in enumerate(persons):
+            if not q["foot_visible"]:
+                continue
+            self.visible += 1
+            if c in det_of:
+                continue
+            self.misses += 1
+            cause = self._miss_cause(frame, q, persons, det_of, people, unmatched, history)
+            self.miss_causes[cause] += 1
+            out["missed"].append({"id": q["id"], "cause": cause})
+        self.detections += len(people)
+        for k in unmatched:
+            self.false_alarms += 1
+            cause = self._fa_cause(frame, z[k], z, person_of, foot, history)
+            self.fa_causes[cause] += 1
+            out["false"].append({"xy": [round(float(v), 3) for v in z[k]], "cause": cause})
+        return out
+
+    @staticmethod
+    def _fa_cause(frame, xy, z, person_of, foot, history) -> str:
+        for k, c in person_of.items():
+            if np.linalg.norm(z[k] - xy) <= FRAGMENT_M and np.linalg.norm(foot[c] - xy) <= FRAGMENT_M:
+                return "fragment"
+        if history is not None:
+            if history.learnt_here(xy):
+                return "ghost_learning"
+            if history.paused_here_before(frame, xy):
+                return "ghost_pause"
+            if len(history.moved_furniture) and np.min(np.linalg.norm(history.moved_furniture - xy, axis=-1)) <= 1.0:
+                return "moved_object"
+        return "far_field" if np.hypot(*xy) > FAR_M else "other"
+
+    @staticmethod
+    def _miss_cause(frame, q, persons, det_of, people, unmatched, history) -> str:
+        for c, other in enumerate(persons):
+            if other is not q and c in det_of and abs(wrap_pi(other["theta_f"] - q["theta_f"])) <= SAME_SECTOR_RAD:
+                return "merged"
+        for k in unmatched:
+            d = people[k]
+            half = 0.5 * abs(float(wrap_pi(d["theta_r"] - d["theta_l"]))) + 0.05
+            if abs(wrap_pi(d["theta_f"] - q["theta_f"])) <= half:
+                return "ghost_sector"
+        if history is not None:
+            if history.still_for(frame, q["id"]) >= PAUSE_S:
+                return "absorbed_standing"
+            if history.floor_like[q["id"]]:
+                return "floor_coloured"
+        return "far_field" if np.hypot(*q["foot_m"]) > FAR_M else "other"
+
+    def nees_figures(self) -> dict:
+        """NEES mean and P(> 6.63) of r_f and theta_f, overall and per range band."""
+        a = np.array(self.nees, float).reshape(-1, 3)
+        out = {"all": _nees(a)}
+        for lo, hi in zip(RANGE_BANDS, RANGE_BANDS[1:]):
+            sel = (a[:, 0] >= lo) & (a[:, 0] < hi)
+            out[f"{lo:g}-{hi:g} m"] = _nees(a[sel])
+        return out
+
+    def summary(self) -> dict:
+        return {"frames": self.frames, "visible": self.visible, "misses": self.misses,
+                "detections": self.detections, "false_alarms": self.false_alarms,
+                "miss_rate": self.misses / self.visible if self.visible else None,
+                "false_alarm_rate": self.false_alarms / self.detections if self.detections else None,
+                "fa_causes": {c: self.fa_causes[c] for c in FA_CAUSES},
+                "miss_causes": {c: self.miss_causes[c] for c in MISS_CAUSES},
+                "nees": self.nees_figures()}
+
+
+def _nees(a: np.ndarray) -> dict:
+    if not len(a):
+        return {"n": 0}
+    return {"n": int(len(a)), "r_f_mean": float(a[:, 1].mean()), "r_f_over_6_63": float(np.mean(a[:, 1] > NEES_99)),
+            "theta_f_mean": float(a[:, 2].mean()), "theta_f_over_6_63": float(np.mean(a[:, 2] > NEES_99))}
