@@ -104,7 +104,7 @@ def sweep(args) -> list[dict]:
         t0 = time.perf_counter()
         truth_lines, det_lines = [], []
 
-        def frames():
+        def frames(world=world, truth_lines=truth_lines):
             for t in range(args.frames):
                 f = world.frame(t)
                 truth_lines.append(truth_line(jax.device_get(f.truth)))

@@ -37,8 +37,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from omnijax.world import head_in_view
-from runtime.validation.perception import match_feet
 from omnijax.zoom import ZOOM_RULES as RULES
+from runtime.validation.perception import match_feet
 
 #: Trials scored at once (one compiled shape); face widths are histogrammed in 1 px bins up to FACE_MAX.
 BATCH, FACE_MAX = 256, 4096
