@@ -125,18 +125,18 @@ def _foveal_rows(scene, view: PTZView, state, row0, n_rows: int):
     d = v.forward + u[..., None] * v.right + w[..., None] * v.down
     d = f32(d)
     eye = v.position
-    people, bg = scene.people, scene.background
-    lamp_light, ambient = state.lamp_light, state.ambient
-    room_hit = intersect_room(scene.room, eye, d)
-    surface_alb = albedo(scene.room, room_hit)
-    e = lamp_irradiance(scene.room, room_hit.point, room_hit.normal, bg.lamps, bg.intensity)
+    people, bg, room = scene.people, scene.background, scene.room_at(state.arrangement)
+    weight, ambient = bg.light_weights(state.lamp_light), jnp.stack(bg.ambient_light(state.ambient))
+    room_hit = intersect_room(room, eye, d)
+    surface_alb = albedo(room, room_hit)
+    e = lamp_irradiance(room, room_hit.point, room_hit.normal, bg.lamps, bg.intensity)
     foot = f32(state.foot)
     start = room_hit.point + 1e-3 * room_hit.normal
     to_lamp = bg.lamps - start[..., None, :]
     segments = shadow_rays(jnp.broadcast_to(start[..., None, :], to_lamp.shape), to_lamp)
     for i in range(people.count):
         e = jnp.where(blocks(body(people, i, foot[i]), segments), 0.0, e)
-    colour = surface_alb * (ambient + jnp.sum(e * lamp_light, axis=-1))[..., None]
+    colour = surface_alb * (ambient + jnp.sum(e[..., None] * weight, axis=-2))
     depth = room_hit.t
     rays = xyz(d)
     eye3 = xyz(eye)
@@ -146,16 +146,17 @@ def _foveal_rows(scene, view: PTZView, state, row0, n_rows: int):
         alb = jnp.stack(body_albedo(people, i, hit, f32(state.facing[i])), axis=-1)
         ts = jnp.where(nearer, hit.t, 0.0)
         p = tuple(o + ts * c for o, c in zip(eye3, rays))
-        light = ambient + lit(p, (hit.nx, hit.ny, hit.nz), bg.lamps, bg.intensity, lamp_light)
-        colour = jnp.where(nearer[..., None], alb * light[..., None], colour)
+        light = ambient + jnp.stack(lit(p, (hit.nx, hit.ny, hit.nz), bg.lamps, bg.intensity, weight), axis=-1)
+        colour = jnp.where(nearer[..., None], alb * light, colour)
         depth = jnp.where(nearer, hit.t, depth)
     return colour * bg.spectrum
 
 
 def render_foveal(world, t: int, pan, tilt, zoom, size: tuple[int, int] | None = None) -> UInt8[Array, "H W 3"]:
     """The foveal camera's 8-bit image of frame ``t`` at (``pan``, ``tilt``) rad and ``zoom``: the same
-    room, people and light as the omni frame, seen through a pinhole at the true PTZ pose, with the
-    scenario's sensor noise (one ray per pixel; for demos). ``size`` (W, H) overrides the lens's."""
+    room (furniture where it stands at ``t``), people and light as the omni frame, seen through a
+    pinhole at the true PTZ pose, with the scenario's sensor noise (one ray per pixel; for demos).
+    ``size`` (W, H) overrides the lens's."""
     view = ptz_view(world.true_rig, pan, tilt, zoom, size)
     state = world.state(t)
     W, H = view.size

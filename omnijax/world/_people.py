@@ -8,9 +8,11 @@ colours (trousers below ``WAIST * H_p``, a top above); the head is skin in
 front and hair on the crown and the back.
 
 People walk on smooth paths between random goals in the walkable floor (inside
-the rig's room, outside its excluded zones and the furniture), keep a gap
-between each other (they never overlap), and sometimes stand still. Walks are
-simulated once per world by :func:`walk` with ``jax.lax.scan``.
+the rig's room, outside its excluded zones and the furniture, at every place a
+piece of furniture ever stands), keep a gap between each other (they never
+overlap), and sometimes stand still: at goals, at the start (``first_pause``) and
+at the scenario's stops, where their velocity is zero. Walks are simulated once
+per world by :func:`walk` with ``jax.lax.scan``.
 """
 
 from __future__ import annotations
@@ -120,15 +122,16 @@ def draw_people(rig: Rig, scenario: Scenario, key: Array) -> People:
 def walkable(rig: Rig, furniture: Furniture, X, Y, clearance) -> Bool[Array, "*b"]:
     """Whether a person of radius ``clearance`` (m) can stand at (X, Y): the disc's centre
     and 8 points of its rim are in the room (outside excluded zones), and it keeps
-    clear of every furniture box."""
+    clear of every furniture box at every place it ever stands (before and after a move)."""
     X, Y = jnp.asarray(X), jnp.asarray(Y)
     a = jnp.linspace(0.0, 2 * jnp.pi, 8, endpoint=False)
     px = jnp.concatenate([X[..., None], X[..., None] + clearance * jnp.cos(a)], axis=-1)
     py = jnp.concatenate([Y[..., None], Y[..., None] + clearance * jnp.sin(a)], axis=-1)
     ok = jnp.all(rig.room.contains(px, py), axis=-1)
     if furniture.count:
-        dx = jnp.maximum(jnp.maximum(furniture.lo[:, 0] - X[..., None], X[..., None] - furniture.hi[:, 0]), 0.0)
-        dy = jnp.maximum(jnp.maximum(furniture.lo[:, 1] - Y[..., None], Y[..., None] - furniture.hi[:, 1]), 0.0)
+        lo, hi = furniture.footprints()
+        dx = jnp.maximum(jnp.maximum(lo[:, 0] - X[..., None], X[..., None] - hi[:, 0]), 0.0)
+        dy = jnp.maximum(jnp.maximum(lo[:, 1] - Y[..., None], Y[..., None] - hi[:, 1]), 0.0)
         ok = ok & jnp.all(jnp.hypot(dx, dy) >= clearance, axis=-1)
     return ok
 
@@ -188,11 +191,15 @@ def _simulate(rig: Rig, scenario: Scenario, people: People, pos: Float[Array, "p
     kp1, kp2 = jax.random.split(k_pause)
     pause0 = jnp.where(jax.random.uniform(kp1, (n,)) < crowd.pause_probability,
                        jax.random.uniform(kp2, (n,), minval=crowd.pause[0], maxval=crowd.pause[1]), 0.0)
+    first = jax.random.uniform(jax.random.fold_in(k_pause, 1), (n,), minval=crowd.first_pause[0],
+                               maxval=crowd.first_pause[1])
+    pause0 = jnp.where(crowd.first_pause[1] > 0, first, pause0)
+    stops = crowd.stop_start.shape[-1] > 0
     to_goal = goals - pos
     facing0 = to_goal / jnp.maximum(jnp.linalg.norm(to_goal, axis=-1, keepdims=True), 1e-9)
     others = lambda i: jnp.arange(n) != i
 
-    def person(i, state, keys):
+    def person(i, state, keys, time):
         pos, vel, goal, pause, facing, blocked, moving = state
         to_goal = goal[i] - pos[i]
         dist = jnp.linalg.norm(to_goal)
@@ -202,8 +209,15 @@ def _simulate(rig: Rig, scenario: Scenario, people: People, pos: Float[Array, "p
         push = jnp.where(others(i) & (d < PUSH_REACH), PUSH * jnp.exp(-(d - 2 * r - gap) / PUSH_RANGE), 0.0)
         want = want + jnp.sum(push[:, None] * away / jnp.maximum(d, 1e-9)[:, None], axis=0)
         standing = pause[i] > 0
+        if stops:  # slow down in time for the next stop (at most ACCEL), stand still through it
+            start, end = crowd.stop_start[i], crowd.stop_end[i]
+            stopped = jnp.any((start <= time) & (time < end))
+            standing = standing | stopped
+            want = _clip_norm(want, ACCEL * jnp.min(jnp.where(start > time, start - time, jnp.inf)))
         want = jnp.where(standing, 0.0, _clip_norm(want, 1.3 * people.speed[i]))
         v = vel[i] + _clip_norm(want - vel[i], ACCEL * dt)
+        if stops:
+            v = jnp.where(stopped, 0.0, v)
         new = pos[i] + v * dt
         apart = jnp.where(others(i), jnp.linalg.norm(pos - new, axis=-1), jnp.inf) >= 2 * r + gap
         fits = walkable(rig, furniture, new[0], new[1], r) & jnp.all(apart)
@@ -224,7 +238,8 @@ def _simulate(rig: Rig, scenario: Scenario, people: People, pos: Float[Array, "p
 
     def step(state, t):
         keys = jax.random.split(jax.random.fold_in(k_steps, t), (n, 3))
-        state = lax.fori_loop(0, n, lambda i, s: person(i, s, keys), state)
+        time = t / scenario.fps  # the time of the frame this step makes
+        state = lax.fori_loop(0, n, lambda i, s: person(i, s, keys, time), state)
         pos, _, _, _, facing, _, moving = state
         return state, (pos, facing, moving)
 
@@ -239,7 +254,10 @@ def walk(rig: Rig, scenario: Scenario, people: People, key: Array, n_frames: int
     Each step moves one person after the other; a move that would leave the
     walkable floor or come closer than ``2 radius + gap`` to anybody is refused
     (the person stops, and after ``BLOCKED_WAIT`` chooses a new goal), so people
-    never overlap. Raises ``ValueError`` when the people do not all fit.
+    never overlap. Everybody starts standing for a time drawn from the crowd's
+    ``first_pause`` (when it is not [0, 0]); a person with a stop slows down
+    before it (at most ``ACCEL``) and has zero velocity in every frame whose time
+    lies in it. Raises ``ValueError`` when the people do not all fit.
     """
     n = people.count
     if n == 0:

@@ -14,8 +14,11 @@ a fixed-size window of the image around it (``jax.lax.dynamic_slice``) with
 (along a ray from the camera the horizontal distance grows, and people's discs
 are disjoint, so this order is the depth order); their cast shadows are found
 on a grid ``shadow_downsample`` times coarser than the image and interpolated
-(a soft penumbra). Shadows and lamps only scale the light, so chromaticity is
-unchanged in shadow. All per-pixel work is float32.
+(a soft penumbra). Under one spectrum, shadows and lamps only scale the light, so
+chromaticity is unchanged in shadow; the light is then one plane per pixel and the
+spectrum is folded into the background's colour. When a lamp has a spectrum of its
+own, light, shadows and the people's shading are computed per colour channel, each
+lamp weighted by its spectrum. All per-pixel work is float32.
 """
 
 from __future__ import annotations
@@ -56,7 +59,7 @@ def omni_rays(omni: OmniCamera, x, y) -> tuple[Array, Array]:
 class OmniBackground(eqx.Module):
     """Everything static about the omni view of one world (float32).
 
-    ``colour`` albedo x spectrum x gain; ``irradiance`` per lamp (grey levels for
+    ``colour`` albedo x ``spectrum`` x gain; ``irradiance`` per lamp (grey levels for
     albedo 1, furniture shadows included); ``depth`` distance to the room along
     each pixel's central ray (m); ``gain`` vignetting times the pixel's share
     inside the image circle; ``rays`` the people's sample rays (``antialias^2``
@@ -64,6 +67,12 @@ class OmniBackground(eqx.Module):
     grid's surface points (cells inside the image circle only, packed) to each lamp,
     ``shadow_irradiance`` each lamp's mean irradiance over those cells, and
     ``shadow_index`` the packed index of each grid cell (``n`` outside the circle).
+
+    Spectra: when every lamp has the ambient light's spectrum, ``spectrum`` is that
+    spectrum (folded into ``colour``) and ``lamp_spectrum`` and ``ambient_spectrum`` are
+    None: light is one plane, computed as it always was. Otherwise ``spectrum`` is ones
+    (3,), ``lamp_spectrum`` the lamps' spectra (k, 3) and ``ambient_spectrum`` the ambient
+    light's (3,): light is three planes, one per channel.
     """
 
     colour: Float[Array, "H W 3"]
@@ -78,6 +87,8 @@ class OmniBackground(eqx.Module):
     lamps: Float[Array, "k 3"]
     intensity: Float[Array, " k"]
     spectrum: Float[Array, "3"]
+    lamp_spectrum: Float[Array, "k 3"] | None
+    ambient_spectrum: Float[Array, "3"] | None
     window: tuple[int, int] = eqx.field(static=True)
     antialias: int = eqx.field(static=True)
     downsample: int = eqx.field(static=True)
@@ -86,6 +97,19 @@ class OmniBackground(eqx.Module):
     def size(self) -> tuple[int, int]:
         """Image (height, width)."""
         return self.depth.shape
+
+    def light_weights(self, lamp_light: Float[Array, " k"]) -> Float[Array, "k s"]:
+        """Each lamp's scale (on x drift) times its spectrum per light plane: (k, 3), or the
+        scale alone (k, 1) under one spectrum."""
+        if self.lamp_spectrum is None:
+            return lamp_light[:, None]
+        return lamp_light[:, None] * self.lamp_spectrum
+
+    def ambient_light(self, ambient) -> tuple[Array, ...]:
+        """The ambient grey level per light plane."""
+        if self.ambient_spectrum is None:
+            return (ambient,)
+        return tuple(ambient * self.ambient_spectrum[c] for c in range(3))
 
 
 def _sample_offsets(n: int) -> np.ndarray:
@@ -166,17 +190,24 @@ def _people_rays(omni, row0, n_rows: int, width: int, a: int):
     return jnp.moveaxis(d, -1, 2).reshape(a * a, 3, n_rows, width).astype(jnp.float32)
 
 
-def build_background(omni: OmniCamera, room: Room3D, lamps, intensity, spectrum, vignetting,
+def build_background(omni: OmniCamera, room: Room3D, lamps, intensity, spectrum, lamp_spectrum, vignetting,
                      window: tuple[int, int], antialias: int, downsample: int) -> OmniBackground:
     """Cast every pixel's rays once and store the static view of the room (see :class:`OmniBackground`).
 
-    ``lamps`` (k, 3) m, ``intensity`` (k,) grey levels at 1 m, ``spectrum`` (3,),
-    ``vignetting`` (relative darkening at the rim), ``window`` the people's
+    ``lamps`` (k, 3) m, ``intensity`` (k,) grey levels at 1 m, ``spectrum`` (3,) the
+    ambient light's, ``lamp_spectrum`` (k, 3) the lamps' (one light plane when they all
+    equal ``spectrum``, three otherwise), ``vignetting`` (relative darkening at the rim),
+    ``window`` the people's
     window (rows, columns) in pixels. Rows are cast in blocks of ``BLOCK_ROWS``
     (``lax.map``) to bound memory.
     """
     width, height = omni.image_size
-    lamps, intensity, spectrum = f32(lamps), f32(intensity), f32(spectrum)
+    lamps, intensity, spectrum, lamp_spectrum = f32(lamps), f32(intensity), f32(spectrum), f32(lamp_spectrum)
+    k = lamps.shape[0]
+    if np.array_equal(np.asarray(lamp_spectrum), np.broadcast_to(np.asarray(spectrum), (k, 3))):
+        lamp_spectrum, ambient_spectrum = None, None
+    else:
+        ambient_spectrum, spectrum = spectrum, jnp.ones((3,), jnp.float32)
     colour, irr, depth, gain, rays, starts = _static_view(omni, room, lamps, intensity, jnp.float32(vignetting),
                                                           antialias, downsample)
     h, w = starts.shape[:2]
@@ -193,8 +224,8 @@ def build_background(omni: OmniCamera, room: Room3D, lamps, intensity, spectrum,
         colour=colour * spectrum * gain[..., None], irradiance=irr, depth=depth, gain=gain, rays=rays,
         shadow=shadow, shadow_irradiance=jnp.asarray(coarse, jnp.float32), shadow_index=jnp.asarray(index),
         eye=jnp.array([0.0, 0.0, 1.0], jnp.float32) * f32(omni.H_o),
-        lamps=lamps, intensity=intensity, spectrum=spectrum, window=window, antialias=antialias,
-        downsample=downsample,
+        lamps=lamps, intensity=intensity, spectrum=spectrum, lamp_spectrum=lamp_spectrum,
+        ambient_spectrum=ambient_spectrum, window=window, antialias=antialias, downsample=downsample,
     )
 
 
@@ -253,20 +284,24 @@ def window_size(omni: OmniCamera, xy: ArrayLike, ok: ArrayLike, radius: ArrayLik
 
 
 def shadow_factor(bg: OmniBackground, people: People, foot: Float[Array, "p 2"],
-                  lamp_light: Float[Array, " k"]) -> Float[Array, "H W"]:
+                  weight: Float[Array, "k s"]) -> tuple[Float[Array, "H W"], ...]:
     """The share of the lamps' light that reaches each pixel's surface past the people
-    (1 where nobody casts a shadow), found on the coarse grid as
-    ``sum_k lamp_light_k E_k lit_k / sum_k lamp_light_k E_k`` and interpolated bilinearly
-    (a soft penumbra)."""
+    (1 where nobody casts a shadow), per light plane c, found on the coarse grid as
+    ``sum_k w_kc E_k lit_k / sum_k w_kc E_k`` (``weight`` w: :meth:`OmniBackground.light_weights`)
+    and interpolated bilinearly (a soft penumbra). With lamps of different spectra the
+    share differs between channels: a shadow changes the light's colour."""
     lit = jnp.ones(bg.shadow.inv.shape, bool)
     for i in range(people.count):
         lit = lit & ~blocks(body(people, i, foot[i]), bg.shadow)
-    e = bg.shadow_irradiance * lamp_light[:, None]
-    total = jnp.sum(e, axis=0)
-    share = jnp.where(total > 0, jnp.sum(jnp.where(lit, e, 0.0), axis=0) / jnp.where(total > 0, total, 1.0), 1.0)
-    grid = jnp.concatenate([share, jnp.ones((1,), share.dtype)])[bg.shadow_index]
     h, w = bg.size
-    return upsample(grid, bg.downsample)[:h, :w]
+    planes = []
+    for c in range(weight.shape[1]):
+        e = bg.shadow_irradiance * weight[:, c, None]
+        total = jnp.sum(e, axis=0)
+        share = jnp.where(total > 0, jnp.sum(jnp.where(lit, e, 0.0), axis=0) / jnp.where(total > 0, total, 1.0), 1.0)
+        grid = jnp.concatenate([share, jnp.ones((1,), share.dtype)])[bg.shadow_index]
+        planes.append(upsample(grid, bg.downsample)[:h, :w])
+    return tuple(planes)
 
 
 def _window_origin(bg: OmniBackground, box: Float[Array, "4"]) -> Int[Array, "2"]:
@@ -285,9 +320,9 @@ def draw_person(bg: OmniBackground, people: People, i, foot: Float[Array, "2"], 
 
     Multisample anti-aliasing: the coverage of each pixel comes from ``antialias^2``
     rays (hidden where the room, e.g. furniture, is nearer); the colour is shaded once
-    per pixel, on the first of its rays that sees the person: albedo x spectrum x gain
-    x (ambient + sum_k lamp_light_k lambert_k). Returns the premultiplied colour and
-    the coverage."""
+    per pixel, on the first of its rays that sees the person: albedo x gain x
+    (ambient x ambient spectrum + sum_k lamp_light_k lambert_k spectrum_k), per light
+    plane (see :class:`OmniBackground`). Returns the premultiplied colour and the coverage."""
     a2 = bg.antialias**2
     wh, ww = bg.window
     b = body(people, i, foot)
@@ -305,9 +340,10 @@ def draw_person(bg: OmniBackground, people: People, i, foot: Float[Array, "2"], 
     hit = hit_body(b, eye, rep)
     ts = jnp.where(jnp.isfinite(hit.t), hit.t, 0.0)
     p = tuple(o + ts * c for o, c in zip(eye, rep))
-    light = ambient + lit(p, (hit.nx, hit.ny, hit.nz), bg.lamps, bg.intensity, lamp_light)
-    scale = light * cover * gain
-    col = tuple(alb * scale * bg.spectrum[c] for c, alb in enumerate(body_albedo(people, i, hit, facing)))
+    lamp = lit(p, (hit.nx, hit.ny, hit.nz), bg.lamps, bg.intensity, bg.light_weights(lamp_light))
+    scale = [(a + e) * cover * gain for a, e in zip(bg.ambient_light(ambient), lamp)]
+    col = tuple(alb * scale[c % len(scale)] * bg.spectrum[c]
+                for c, alb in enumerate(body_albedo(people, i, hit, facing)))
     col, cover = own_buffer((col, cover), origin[0] >= 0)  # stacking would recompute the shading per channel
     return jnp.stack(col, axis=-1), cover
 
@@ -325,16 +361,21 @@ class LinearFrame(eqx.Module):
 def render_linear(omni: OmniCamera, bg: OmniBackground, people: People, foot: Float[Array, "p 2"],
                   facing: Float[Array, "p 2"], lamp_light: Float[Array, " k"], ambient) -> LinearFrame:
     """One noise-free omni frame in grey levels (float32): the background lit by the lamps
-    (``lamp_light`` scales each lamp's intensity: on/off times drift) and ``ambient`` (grey
-    levels, drift included), minus the people's cast shadows, with the people drawn over it
-    far to near."""
+    (``lamp_light`` scales each lamp's intensity: on/off times drift; each lamp of its own
+    spectrum) and ``ambient`` (grey levels, drift included), minus the people's cast shadows,
+    with the people drawn over it far to near."""
     foot32 = foot.astype(jnp.float32)
     facing32 = facing.astype(jnp.float32)
-    lamps = jnp.zeros(bg.size, jnp.float32)
-    for k in range(bg.lamps.shape[0]):
-        lamps = lamps + lamp_light[k] * bg.irradiance[k]
-    light = ambient + lamps * shadow_factor(bg, people, foot32, lamp_light)
-    image = bg.colour * light[..., None]
+    weight = bg.light_weights(lamp_light)
+    share = shadow_factor(bg, people, foot32, weight)
+    ambient_light = bg.ambient_light(ambient)
+    light = []
+    for c in range(weight.shape[1]):
+        lamps = jnp.zeros(bg.size, jnp.float32)
+        for k in range(bg.lamps.shape[0]):
+            lamps = lamps + weight[k, c] * bg.irradiance[k]
+        light.append(ambient_light[c] + lamps * share[c])
+    image = bg.colour * jnp.stack(light, axis=-1)
     labels = jnp.full(bg.size, -1, jnp.int32)
     n = people.count
     if n == 0:

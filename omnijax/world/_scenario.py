@@ -2,9 +2,10 @@
 
 A scenario names its rig file (``rig = "../paper.toml"``, relative to the
 scenario) and adds what the rig does not say: the room's walls and textures,
-furniture boxes, the people (how many, clothing, walking), the lamps (one shared
-spectrum, positions, intensities, switching times), slow illumination drift, and
-the sensor (noise, JPEG, anti-aliasing). Every key is documented in
+furniture boxes (some may move once, at a given time), the people (how many,
+clothing, walking, standing still at the start or at given times), the lamps
+(one shared spectrum unless a lamp has its own, positions, intensities, switching
+times), slow illumination drift, and the sensor (noise, JPEG, anti-aliasing). Every key is documented in
 ``configs/scenarios/one_person.toml``.
 
 :func:`parse_scenario` validates the mapping against the schema and against the
@@ -27,7 +28,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from annotated_types import Len
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, Bool, Float, Int
 from pydantic import Field, model_validator
 
 from ..config import ConfigError, Coordinate, Metres, PosMetres, Rig, Section, validate, within
@@ -55,16 +56,62 @@ class Surface(eqx.Module):
 
 
 class Furniture(eqx.Module):
-    """Axis-aligned boxes standing on the floor: footprint corners (m), heights (m), albedos."""
+    """Axis-aligned boxes standing on the floor: footprint corners (m), heights (m), albedos.
+
+    A piece may move once: at ``move_at`` (s; inf: never) its footprint's corner_min
+    jumps from ``lo`` to ``moved_lo`` (same size) and it stays there. ``moving`` lists
+    the pieces that move, in the order of their times (ties in file order): the
+    furniture's *arrangement* ``j`` has the first ``j`` of them moved.
+    """
 
     lo: Float[Array, "n 2"]
     hi: Float[Array, "n 2"]
     height: Float[Array, " n"]
     colour: Float[Array, "n 3"]
+    move_at: Float[Array, " n"]
+    moved_lo: Float[Array, "n 2"]
+    moving: tuple[int, ...] = eqx.field(static=True)
 
     @property
     def count(self) -> int:
         return self.lo.shape[0]
+
+    @property
+    def arrangements(self) -> int:
+        """How many arrangements the furniture goes through (1 when nothing moves)."""
+        return len(self.moving) + 1
+
+    def arrangement(self, t) -> Int[Array, "*b"]:
+        """The arrangement at time(s) ``t`` (s): how many moving pieces have moved."""
+        t = jnp.asarray(t)
+        if not self.moving:
+            return jnp.zeros(t.shape, jnp.int32)
+        times = self.move_at[jnp.asarray(self.moving)]
+        return jnp.sum(times <= t[..., None], axis=-1).astype(jnp.int32)
+
+    def placed(self, j: int) -> tuple[Float[Array, "n 2"], Float[Array, "n 2"]]:
+        """Footprint corners (lo, hi) of every piece in arrangement ``j``."""
+        lo, hi = self.lo, self.hi
+        for i in self.moving[:j]:
+            lo, hi = lo.at[i].set(self.moved_lo[i]), hi.at[i].set(self.moved_lo[i] + (self.hi[i] - self.lo[i]))
+        return lo, hi
+
+    def footprints(self) -> tuple[Float[Array, "m 2"], Float[Array, "m 2"]]:
+        """Footprint corners (lo, hi) of every place any piece ever stands (the first
+        arrangement, then each moving piece's new place): what people walk around."""
+        if not self.moving:
+            return self.lo, self.hi
+        i = jnp.asarray(self.moving)
+        lo = self.moved_lo[i]
+        return jnp.concatenate([self.lo, lo]), jnp.concatenate([self.hi, lo + (self.hi[i] - self.lo[i])])
+
+    def moved_centres(self) -> Float[Array, "m2 2"]:
+        """Footprint centres (m) of each moving piece before and after its move, in pairs."""
+        centres = []
+        for i in self.moving:
+            size = self.hi[i] - self.lo[i]
+            centres += [self.lo[i] + 0.5 * size, self.moved_lo[i] + 0.5 * size]
+        return jnp.stack(centres) if centres else jnp.zeros((0, 2))
 
 
 class Crowd(eqx.Module):
@@ -72,15 +119,21 @@ class Crowd(eqx.Module):
 
     ``speed`` is the range of preferred walking speeds (m/s); at each reached
     goal a person stands still with probability ``pause_probability`` for a
-    time drawn from ``pause`` (s). ``floor_like`` is the share of people whose
-    clothing is close to the floor's colour. ``gap`` is the smallest distance
-    (m) kept between two people's body cylinders.
+    time drawn from ``pause`` (s). ``first_pause`` is the range (s) of the
+    standing time everybody starts with ([0, 0]: a chance of a ``pause`` as at
+    a goal). Person ``i`` also stands still from ``stop_start[i, j]`` until
+    ``stop_end[i, j]`` (s; padded with +inf). ``floor_like`` is the share of
+    people whose clothing is close to the floor's colour. ``gap`` is the
+    smallest distance (m) kept between two people's body cylinders.
     """
 
     count: int = eqx.field(static=True)
     speed: Float[Array, "2"]
     pause_probability: Float[Array, ""]
     pause: Float[Array, "2"]
+    first_pause: Float[Array, "2"]
+    stop_start: Float[Array, "p m"]
+    stop_end: Float[Array, "p m"]
     gap: Float[Array, ""]
     clothing: Float[Array, "k 3"]
     skin: Float[Array, "ks 3"]
@@ -89,9 +142,11 @@ class Crowd(eqx.Module):
 
 
 class Lighting(eqx.Module):
-    """Lamps of one spectrum, ambient light of the same spectrum, and a slow global drift.
+    """Lamps, ambient light of the scenario's ``spectrum``, and a slow global drift.
 
-    ``switch`` holds each lamp's switching times (s), padded with +inf; a lamp
+    Each lamp has its own spectrum, ``lamp_spectrum`` (the scenario's ``spectrum``
+    unless the file gives one: then all light shares one spectrum, the paper's
+    assumption). ``switch`` holds each lamp's switching times (s), padded with +inf; a lamp
     is on at time t when ``on`` xor (an odd number of switches at or before t).
     The drift multiplies all light by ``1 + drift_amplitude sin(2 pi t / drift_period)``.
     """
@@ -99,6 +154,7 @@ class Lighting(eqx.Module):
     spectrum: Float[Array, "3"]
     ambient: Float[Array, ""]
     position: Float[Array, "k 3"]
+    lamp_spectrum: Float[Array, "k 3"]
     intensity: Float[Array, " k"]
     on: Bool[Array, " k"]
     switch: Float[Array, "k m"]
@@ -211,12 +267,27 @@ class FurnitureSection(Section):
     corner_max: Point2 = Field(description="footprint corner with the largest x and y, m")
     height: PosMetres
     colour: Colour
+    move_at_s: Seconds | None = Field(None, description="time the piece moves to moved_to, s; default: never")
+    moved_to: Point2 | None = Field(None, description="footprint centre after the move, m")
 
     @model_validator(mode="after")
     def _box(self):
         if not (self.corner_min[0] < self.corner_max[0] and self.corner_min[1] < self.corner_max[1]):
             raise ValueError("corner_min must be below corner_max in both x and y")
+        if (self.move_at_s is None) != (self.moved_to is None):
+            raise ValueError("move_at_s and moved_to go together: give both or neither")
         return self
+
+    def moved_min(self) -> list[float]:
+        """corner_min after the move (``moved_to`` is the footprint's new centre)."""
+        half = [0.5 * (b - a) for a, b in zip(self.corner_min, self.corner_max)]
+        return [c - h for c, h in zip(self.moved_to, half)]
+
+
+class StopSection(Section):
+    person: Annotated[int, Field(ge=0, le=63)] = Field(description="index of the person, 0 .. count - 1")
+    at_s: Seconds = Field(description="time the person stands still from, s")
+    seconds: PosSeconds = Field(description="how long the person stands still, s")
 
 
 class PeopleSection(Section):
@@ -224,6 +295,9 @@ class PeopleSection(Section):
     speed: Annotated[list[Speed], Len(2, 2)] = Field([0.8, 1.4], description="preferred walking speed range, m/s")
     pause_probability: Unit = 0.3
     pause: Annotated[list[Seconds], Len(2, 2)] = Field([1.0, 4.0], description="standing time range at a goal, s")
+    first_pause: Annotated[list[Seconds], Len(2, 2)] = Field(
+        [0.0, 0.0], description="standing time range everybody starts with, s; [0, 0]: none")
+    stops: list[StopSection] = Field(default_factory=list, description="times given people stand still")
     gap: Metres = Field(0.10, description="smallest distance kept between two people, m")
     clothing: Annotated[list[Colour], Len(1)] = Field(default_factory=lambda: [list(c) for c in CLOTHING])
     skin: Annotated[list[Colour], Len(1)] = Field(default_factory=lambda: [list(c) for c in SKIN])
@@ -234,6 +308,7 @@ class PeopleSection(Section):
     def _ranges(self):
         _ordered(self.speed, "speed")
         _ordered(self.pause, "pause")
+        _ordered(self.first_pause, "first_pause")
         if self.speed[0] <= 0:
             raise ValueError("speed must be positive")
         return self
@@ -244,6 +319,7 @@ class LampSection(Section):
     intensity: Light = Field(description="grey level of a white surface 1 m away, facing the lamp")
     on: bool = Field(True, description="on at t = 0")
     switch: list[Seconds] = Field(default_factory=list, description="times (s) at which the lamp toggles")
+    spectrum: PosColour | None = Field(None, description="RGB of this lamp's spectrum; default: lighting.spectrum")
 
     @model_validator(mode="after")
     def _times(self):
@@ -258,7 +334,7 @@ class DriftSection(Section):
 
 
 class LightingSection(Section):
-    spectrum: PosColour = Field(description="RGB of the one spectrum all lamps and the ambient share")
+    spectrum: PosColour = Field(description="RGB of the ambient light's spectrum, and of every lamp without its own")
     ambient: Light
     drift: DriftSection = DriftSection()
     lamps: list[LampSection] = Field(default_factory=list)
@@ -323,14 +399,30 @@ def _check_against_rig(f: ScenarioFile, rig: Rig, source: str) -> None:
         if not tallest < z < f.room.height:
             fail(f"lighting.lamps.{i}.position",
                  f"z = {z} m must lie between the tallest person ({tallest:.2f} m) and the ceiling ({f.room.height} m)")
-    for i, box in enumerate(f.furniture):
-        (x0, y0), (x1, y1) = box.corner_min, box.corner_max
+    def inside(lo, hi) -> bool:
+        (x0, y0), (x1, y1) = lo, hi
         e = 1e-3  # boxes may touch the walls
         corners = np.array([[x0 + e, y0 + e], [x1 - e, y1 - e], [x0 + e, y1 - e], [x1 - e, y0 + e]])
-        if not bool(np.all(_in_polygon(outline, corners[:, 0], corners[:, 1]))):
+        return bool(np.all(_in_polygon(outline, corners[:, 0], corners[:, 1])))
+
+    for i, box in enumerate(f.furniture):
+        if not inside(box.corner_min, box.corner_max):
             fail(f"furniture.{i}", "the box must stand inside the rig's room.outline")
         if box.height >= f.room.height:
             fail(f"furniture.{i}.height", f"{box.height} m must be below room.height = {f.room.height} m")
+        if box.moved_to is not None:
+            lo = box.moved_min()
+            hi = [a + b - c for a, b, c in zip(lo, box.corner_max, box.corner_min)]
+            if not inside(lo, hi):
+                fail(f"furniture.{i}.moved_to", f"{box.moved_to}: the moved box must stand inside the room.outline")
+    count = f.people.count
+    for j, stop in enumerate(f.people.stops):
+        if stop.person >= count:
+            fail(f"people.stops.{j}.person", f"{stop.person} is not a person of people.count = {count}")
+        for k, other in enumerate(f.people.stops[:j]):
+            overlap = stop.at_s < other.at_s + other.seconds and other.at_s < stop.at_s + stop.seconds
+            if other.person == stop.person and overlap:
+                fail(f"people.stops.{j}", f"overlaps people.stops.{k} of the same person")
 
 
 def parse_scenario(data: Mapping[str, Any], rig: Rig, *, source: str = "scenario") -> Scenario:
@@ -341,15 +433,26 @@ def parse_scenario(data: Mapping[str, Any], rig: Rig, *, source: str = "scenario
     f = read_scenario_header(data, source=source)
     _check_against_rig(f, rig, source)
     furn = f.furniture
+    move_at = [np.inf if b.move_at_s is None else b.move_at_s for b in furn]
     furniture = Furniture(
         lo=_a(np.reshape([b.corner_min for b in furn], (-1, 2))),
         hi=_a(np.reshape([b.corner_max for b in furn], (-1, 2))),
         height=_a([b.height for b in furn]),
         colour=_a(np.reshape([b.colour for b in furn], (-1, 3))),
+        move_at=_a(move_at),
+        moved_lo=_a(np.reshape([b.corner_min if b.moved_to is None else b.moved_min() for b in furn], (-1, 2))),
+        moving=tuple(sorted((i for i, b in enumerate(furn) if b.moved_to is not None), key=lambda i: move_at[i])),
     )
     pe = f.people
+    per_person = [[s for s in pe.stops if s.person == i] for i in range(pe.count)]
+    n_stops = max([len(s) for s in per_person] + [0])
+    stop_start, stop_end = np.full((pe.count, n_stops), np.inf), np.full((pe.count, n_stops), np.inf)
+    for i, stops in enumerate(per_person):
+        stop_start[i, : len(stops)] = [s.at_s for s in stops]
+        stop_end[i, : len(stops)] = [s.at_s + s.seconds for s in stops]
     crowd = Crowd(
         count=pe.count, speed=_a(pe.speed), pause_probability=_a(pe.pause_probability), pause=_a(pe.pause),
+        first_pause=_a(pe.first_pause), stop_start=_a(stop_start), stop_end=_a(stop_end),
         gap=_a(pe.gap), clothing=_a(pe.clothing), skin=_a(pe.skin), hair=_a(pe.hair),
         floor_like=_a(pe.floor_like),
     )
@@ -361,6 +464,7 @@ def parse_scenario(data: Mapping[str, Any], rig: Rig, *, source: str = "scenario
     lighting = Lighting(
         spectrum=_a(li.spectrum), ambient=_a(li.ambient),
         position=_a(np.reshape([lamp.position for lamp in li.lamps], (-1, 3))),
+        lamp_spectrum=_a(np.reshape([lamp.spectrum or li.spectrum for lamp in li.lamps], (-1, 3))),
         intensity=_a([lamp.intensity for lamp in li.lamps]),
         on=jnp.asarray([lamp.on for lamp in li.lamps], dtype=bool),
         switch=_a(switch), drift_amplitude=_a(li.drift.amplitude), drift_period=_a(li.drift.period),

@@ -7,11 +7,12 @@ scenario's ``room.height``, and furniture boxes on the floor. Rays are
 z up); ``direction`` need not be unit length, and ``t`` is in its units.
 
 Light (see ``_scenario``): the grey level of a surface point is
-``albedo * spectrum * (ambient + sum_k on_k E_k)``, with ``E_k`` the lamp's
-intensity times the cosine of incidence over the squared distance, zero where
-a wall or a furniture box blocks the lamp. All lamps and the ambient light
-share one spectrum, so shadows and switching scale a pixel's colour and keep
-its chromaticity (the paper's assumption).
+``albedo * (ambient spectrum + sum_k on_k E_k spectrum_k)``, with ``E_k`` the
+lamp's intensity times the cosine of incidence over the squared distance, zero
+where a wall or a furniture box blocks the lamp. When all lamps and the ambient
+light share one spectrum, this is ``albedo * spectrum * (ambient + sum_k on_k E_k)``:
+shadows and switching scale a pixel's colour and keep its chromaticity (the
+paper's assumption); a lamp of another spectrum (daylight beside lamps) breaks it.
 """
 
 from __future__ import annotations
@@ -60,15 +61,17 @@ class Room3D(eqx.Module):
     key: UInt32[Array, "2"]
 
 
-def build_room(rig: Rig, scenario: Scenario, key: UInt32[Array, "2"]) -> Room3D:
-    """The room of ``scenario`` on ``rig``'s floor outline; ``key`` seeds the textures."""
+def build_room(rig: Rig, scenario: Scenario, key: UInt32[Array, "2"], arrangement: int = 0) -> Room3D:
+    """The room of ``scenario`` on ``rig``'s floor outline with the furniture in its
+    ``arrangement`` (see :class:`Furniture`); ``key`` seeds the textures."""
     outline = np.asarray(rig.room.outline)
     fu = scenario.furniture
+    lo, hi = fu.placed(arrangement)
     zeros = np.zeros((fu.count, 1))
     return Room3D(
         wall_a=f32(outline), wall_b=f32(np.roll(outline, -1, axis=0)), height=f32(scenario.height),
-        box_lo=f32(np.concatenate([np.asarray(fu.lo), zeros], axis=1)),
-        box_hi=f32(np.concatenate([np.asarray(fu.hi), np.asarray(fu.height)[:, None]], axis=1)),
+        box_lo=f32(np.concatenate([np.asarray(lo), zeros], axis=1)),
+        box_hi=f32(np.concatenate([np.asarray(hi), np.asarray(fu.height)[:, None]], axis=1)),
         box_colour=f32(fu.colour), floor=f32(scenario.floor), walls=f32(scenario.walls),
         ceiling=f32(scenario.ceiling), skirting_colour=f32(scenario.skirting_colour),
         skirting_height=f32(scenario.skirting_height), key=key,
@@ -226,13 +229,17 @@ def lambert(point: Float[Array, "*b 3"], normal: Float[Array, "*b 3"], lamps: Fl
     return jnp.stack([_lambert_one(p, n, lamps[k], intensity[k]) for k in range(lamps.shape[0])], axis=-1)
 
 
-def lit(p, n, lamps: Float[Array, "k 3"], intensity: Float[Array, " k"], weight: Float[Array, " k"]) -> Array:
-    """``sum_k weight_k`` times :func:`lambert`'s irradiance at points ``p`` with unit normals ``n``,
-    both given as component triples (x, y, z): one elementwise loop for XLA."""
-    total = jnp.zeros(jnp.broadcast_shapes(*(jnp.shape(c) for c in (*p, *n))), jnp.result_type(*p))
+def lit(p, n, lamps: Float[Array, "k 3"], intensity: Float[Array, " k"],
+        weight: Float[Array, "k s"]) -> tuple[Array, ...]:
+    """For each column ``c`` of ``weight`` (a lamp's scale times its spectrum, or one column for
+    one spectrum): ``sum_k weight_kc`` times :func:`lambert`'s irradiance at points ``p`` with unit
+    normals ``n``, both given as component triples (x, y, z): one elementwise loop for XLA."""
+    zero = jnp.zeros(jnp.broadcast_shapes(*(jnp.shape(c) for c in (*p, *n))), jnp.result_type(*p))
+    totals = [zero] * weight.shape[1]
     for k in range(lamps.shape[0]):
-        total = total + weight[k] * _lambert_one(p, n, lamps[k], intensity[k])
-    return total
+        e = _lambert_one(p, n, lamps[k], intensity[k])
+        totals = [total + weight[k, c] * e for c, total in enumerate(totals)]
+    return tuple(totals)
 
 
 def lamp_irradiance(room: Room3D, point: Float[Array, "*b 3"], normal: Float[Array, "*b 3"],

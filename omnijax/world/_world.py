@@ -4,7 +4,9 @@ Build a :class:`World` once from (rig, scenario, seed) with :func:`build_world`;
 ``world.frame(t)`` (jitted) renders frame ``t`` and returns the 8-bit image, a
 label image and the :class:`Truth`. A world is
 a :class:`Scene` (rig, people, room, static view) plus the walks and the lighting
-of every frame; the renderer takes the scene and one :class:`FrameState`.
+of every frame; the renderer takes the scene and one :class:`FrameState`. Furniture
+that moves makes more than one arrangement of the room: the scene holds the room
+and its static view for each, and each frame renders the one of its time.
 
 docs/design.md section 5: calibration errors are systematic, so the world draws its
 *true* rig once per seed from the configured rig and its calibration sigmas
@@ -19,6 +21,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax import lax
 from jaxtyping import Array, Bool, Float, Int, UInt8, UInt32
 
 from ..config import Rig
@@ -101,18 +104,21 @@ class RenderedFrame(eqx.Module):
 
 
 class Schedule(eqx.Module):
-    """The lighting of every frame, tabulated once (per-frame scalars computed inside the
-    per-pixel loops would be recomputed for every pixel): lamps on, the drift factor, each
-    lamp's scale (on x drift) and the ambient grey level (drift included)."""
+    """The lighting and the furniture of every frame, tabulated once (per-frame scalars computed
+    inside the per-pixel loops would be recomputed for every pixel): lamps on, the drift factor,
+    each lamp's scale (on x drift), the ambient grey level (drift included) and the furniture's
+    arrangement (how many moving pieces have moved)."""
 
     on: Bool[Array, "t k"]
     drift: Float[Array, " t"]
     lamp_light: Float[Array, "t k"]
     ambient: Float[Array, " t"]
+    arrangement: Int[Array, " t"]
 
 
 def clothing_contrast(people: People, scenario: Scenario) -> Float[Array, "p 2"]:
-    """Chromaticity distance (r, g) of each person's top and trousers from the floor's mean colour.
+    """Chromaticity distance (r, g) of each person's top and trousers from the floor's mean colour,
+    both under the scenario's ``lighting.spectrum``.
 
     Albedos are scaled to grey levels (x 255) first: chromaticity only sees ratios, but
     :func:`omnijax.chromaticity` treats sums below one grey level as dark."""
@@ -129,26 +135,44 @@ def light_schedule(scenario: Scenario, n_frames: int) -> Schedule:
     time = jnp.arange(n_frames) / scenario.fps
     on = jax.vmap(li.lamp_on)(time)
     drift = jax.vmap(li.drift)(time)
-    return Schedule(on=on, drift=drift, lamp_light=f32(on * drift[:, None]), ambient=f32(li.ambient * drift))
+    return Schedule(on=on, drift=drift, lamp_light=f32(on * drift[:, None]), ambient=f32(li.ambient * drift),
+                    arrangement=scenario.furniture.arrangement(time))
 
 
 class Scene(eqx.Module):
     """What does not change from frame to frame: the configured and the true rig, the scenario,
-    the people (sizes, colours), the room and its static view, the sensor noise's key."""
+    the people (sizes, colours), the room and its static view in each arrangement of the
+    furniture (one unless furniture moves), the sensor noise's key."""
 
     rig: Rig
     true_rig: Rig
     scenario: Scenario
     people: People
-    room: Room3D
-    background: OmniBackground
+    rooms: tuple[Room3D, ...]
+    backgrounds: tuple[OmniBackground, ...]
     noise_key: UInt32[Array, "2"]
+
+    @property
+    def room(self) -> Room3D:
+        """The room in the furniture's first arrangement."""
+        return self.rooms[0]
+
+    @property
+    def background(self) -> OmniBackground:
+        """The static view in the furniture's first arrangement."""
+        return self.backgrounds[0]
+
+    def room_at(self, arrangement: Int[Array, ""]) -> Room3D:
+        """The room in ``arrangement`` (a traced index is fine)."""
+        if len(self.rooms) == 1:
+            return self.rooms[0]
+        return jax.tree.map(lambda *x: jnp.stack(x)[arrangement], *self.rooms)
 
 
 class FrameState(eqx.Module):
     """One instant of a world (or a stack of them, along leading axes): frame index, the people's
-    feet (m), facing and walking, which lamps are on, the drift, each lamp's scale and the ambient
-    grey level."""
+    feet (m), facing and walking, which lamps are on, the drift, each lamp's scale, the ambient
+    grey level and the furniture's arrangement."""
 
     t: Int[Array, "*n"]
     foot: Float[Array, "*n p 2"]
@@ -158,6 +182,7 @@ class FrameState(eqx.Module):
     drift: Float[Array, "*n"]
     lamp_light: Float[Array, "*n k"]
     ambient: Float[Array, "*n"]
+    arrangement: Int[Array, "*n"]
 
 
 class World(eqx.Module):
@@ -192,11 +217,19 @@ class World(eqx.Module):
 
     @property
     def room(self) -> Room3D:
+        """The room in the furniture's first arrangement."""
         return self.scene.room
 
     @property
     def background(self) -> OmniBackground:
+        """The static view in the furniture's first arrangement."""
         return self.scene.background
+
+    @property
+    def moved_furniture(self) -> np.ndarray:
+        """Footprint centres (m) of every piece of furniture that moves, before and after its
+        move, in pairs: (2 x moving pieces, 2)."""
+        return np.asarray(self.scenario.furniture.moved_centres()).reshape(-1, 2)
 
     @property
     def n_frames(self) -> int:
@@ -246,19 +279,25 @@ def build_world(rig: Rig, scenario: Scenario, seed: int | None = None, n_frames:
     truth_rig = draw_true_rig(rig, k_rig) if true_rig is None else true_rig
     people = draw_people(rig, scenario, k_people)
     paths = walk(rig, scenario, people, k_walk, n_frames)
-    room = build_room(rig, scenario, derive_key(base, 1))
+    fu = scenario.furniture
+    rooms = tuple(build_room(rig, scenario, derive_key(base, 1), j) for j in range(fu.arrangements))
     omni = truth_rig.omni
     lo, hi = np.asarray(rig.room.outline).min(0), np.asarray(rig.room.outline).max(0)
     xy = np.stack(np.meshgrid(np.arange(lo[0], hi[0], WINDOW_GRID), np.arange(lo[1], hi[1], WINDOW_GRID)), -1)
-    ok = _walkable_grid(rig, scenario.furniture, xy, people.radius)
+    ok = _walkable_grid(rig, fu, xy, people.radius)
     tall = rig.person.H_p + 4 * rig.sigmas.H_p
     big = rig.person.R_h + 4 * rig.sigmas.R_h
     window = window_size(omni, xy, ok, people.radius, SHOULDER * tall, tall - big, big) if people.count else (8, 8)
-    li = scenario.lighting
-    bg = build_background(omni, room, li.position, li.intensity, li.spectrum, scenario.sensor.vignetting,
-                          window, scenario.sensor.antialias, scenario.sensor.shadow_downsample)
-    scene = Scene(rig=rig, true_rig=truth_rig, scenario=scenario, people=people, room=room, background=bg,
-                  noise_key=derive_key(base, 2))
+    li, se = scenario.lighting, scenario.sensor
+    backgrounds = []
+    for room in rooms:
+        bg = build_background(omni, room, li.position, li.intensity, li.spectrum, li.lamp_spectrum, se.vignetting,
+                              window, se.antialias, se.shadow_downsample)
+        if backgrounds:  # the people's rays do not depend on the furniture: share one buffer
+            bg = eqx.tree_at(lambda b: b.rays, bg, backgrounds[0].rays)
+        backgrounds.append(bg)
+    scene = Scene(rig=rig, true_rig=truth_rig, scenario=scenario, people=people, rooms=rooms,
+                  backgrounds=tuple(backgrounds), noise_key=derive_key(base, 2))
     return World(scene=scene, paths=paths, schedule=light_schedule(scenario, n_frames),
                  seed=jnp.asarray(seed, jnp.int64))
 
@@ -278,12 +317,18 @@ def frame_state(paths: Paths, schedule: Schedule, t: Int[Array, "*n"]) -> FrameS
     t = eqx.error_if(t, jnp.any((t < 0) | (t >= n)), f"frame index outside 0..{n - 1}")
     return FrameState(t=t, foot=paths.position[t], facing=paths.facing[t], moving=paths.moving[t],
                       lamps_on=schedule.on[t], drift=schedule.drift[t], lamp_light=schedule.lamp_light[t],
-                      ambient=schedule.ambient[t])
+                      ambient=schedule.ambient[t], arrangement=schedule.arrangement[t])
 
 
 def _linear(scene: Scene, state: FrameState):
-    return render_linear(scene.true_rig.omni, scene.background, scene.people, state.foot, state.facing,
-                         state.lamp_light, state.ambient)
+    """The frame over the static view of the state's arrangement (only that one is rendered)."""
+    def render(bg):
+        return render_linear(scene.true_rig.omni, bg, scene.people, state.foot, state.facing, state.lamp_light,
+                             state.ambient)
+
+    if len(scene.backgrounds) == 1:
+        return render(scene.backgrounds[0])
+    return lax.switch(state.arrangement, [lambda bg=bg: render(bg) for bg in scene.backgrounds])
 
 
 @eqx.filter_jit
@@ -308,20 +353,22 @@ def frame_truth(scene: Scene, state: FrameState, area: Float[Array, " p"]) -> Tr
         frame=state.t, time=state.t / scene.scenario.fps, foot=foot,
         head=jnp.concatenate([foot, people.head_z[:, None]], axis=-1), H_p=people.H_p, R_h=people.R_h,
         r_f=r_f, theta_f=theta, pixel=jnp.stack([px, py], -1), r_inner=r_inner, r_head=r_head,
-        in_image=r_f <= omni.rim, foot_visible=_foot_visible(scene, foot), area=area,
+        in_image=r_f <= omni.rim, foot_visible=_foot_visible(scene, scene.room_at(state.arrangement), foot),
+        area=area,
         moving=state.moving, lamps_on=state.lamps_on, illumination=state.drift,
     )
 
 
-def _foot_visible(scene: Scene, foot: Float[Array, "p 2"]) -> Bool[Array, " p"]:
-    """Whether the camera sees each body's floor point nearest to its axis (not hidden by the room or others)."""
+def _foot_visible(scene: Scene, room: Room3D, foot: Float[Array, "p 2"]) -> Bool[Array, " p"]:
+    """Whether the camera sees each body's floor point nearest to its axis (not hidden by ``room``
+    or others)."""
     people, n = scene.people, scene.people.count
     eye = scene.background.eye
     rho = jnp.hypot(foot[:, 0], foot[:, 1])
     inner = foot * (jnp.maximum(rho - people.radius, 0.0) / jnp.maximum(rho, 1e-9))[:, None]
     target = f32(jnp.concatenate([inner, jnp.zeros((n, 1))], axis=-1))
     d = target - eye
-    hidden = intersect_room(scene.room, eye, d).t < 1.0 - 1e-3
+    hidden = intersect_room(room, eye, d).t < 1.0 - 1e-3
     for j in range(n):
         t_j = body_distance(body(people, j, f32(foot[j])), xyz(eye), xyz(d))
         hidden = hidden | ((jnp.arange(n) != j) & (t_j < 1.0 - 1e-3))

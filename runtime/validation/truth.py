@@ -3,7 +3,7 @@
 ``truth.jsonl`` keeps docs/design.md section 7.3's contract: ``frame`` and ``persons`` [{``id``,
 ``foot_m`` [x, y], ``head_m`` [x, y, z], ``r_f``, ``theta_f``}], with more keys per person
 and per frame; ``world.json`` holds what does not change from frame to frame (the true rig,
-the people's sizes and colours, the sensor).
+the people's sizes and colours, the sensor, the lamps, the furniture that moves and when).
 """
 
 from __future__ import annotations
@@ -58,7 +58,9 @@ def _rig_values(rig) -> dict:
 
 
 def world_summary(world: World) -> dict:
-    """The ``world.json`` object: scenario, seed, sensor, the true and the configured rig, the people."""
+    """The ``world.json`` object: scenario, seed, sensor, the true and the configured rig, the people,
+    the lamps (position, intensity, spectrum) and the moved furniture (``index`` in the scenario's
+    furniture, footprint centres ``from_m`` and ``to_m``, ``size_m``, ``at_s``)."""
     sc, pe = world.scenario, world.people
     contrast = np.asarray(world.clothing_contrast())
     sigma = float(sc.sensor.noise_sigma)
@@ -81,10 +83,21 @@ def world_summary(world: World) -> dict:
                    "antialias": sc.sensor.antialias, "shadow_downsample": sc.sensor.shadow_downsample},
         "true_rig": _rig_values(world.true_rig), "configured_rig": _rig_values(world.rig),
         "people": people,
-        "lamps": [{"position_m": [float(v) for v in p], "intensity": float(i)}
-                  for p, i in zip(np.asarray(sc.lighting.position), np.asarray(sc.lighting.intensity))],
+        "lamps": [{"position_m": [float(v) for v in p], "intensity": float(i), "spectrum": [float(v) for v in s]}
+                  for p, i, s in zip(np.asarray(sc.lighting.position), np.asarray(sc.lighting.intensity),
+                                     np.asarray(sc.lighting.lamp_spectrum))],
+        "ambient_spectrum": [float(v) for v in np.asarray(sc.lighting.spectrum)],
+        "moved_furniture": _moved_furniture(world),
         "window_px": list(world.background.window),
     }
+
+
+def _moved_furniture(world: World) -> list[dict]:
+    fu = world.scenario.furniture
+    centres = world.moved_furniture.reshape(-1, 2, 2)
+    return [{"index": i, "from_m": [float(v) for v in c[0]], "to_m": [float(v) for v in c[1]],
+             "size_m": [float(v) for v in np.asarray(fu.hi[i] - fu.lo[i])], "height_m": float(fu.height[i]),
+             "at_s": float(fu.move_at[i])} for i, c in zip(fu.moving, centres)]
 
 
 def true_aim(world: World, person: dict) -> Pointing:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import tomllib
 
+import numpy as np
 import pytest
 
 from omnijax import ConfigError
@@ -16,9 +17,10 @@ from tests.paths import CONFIGS
 SCENARIOS = sorted((CONFIGS / "scenarios").glob("*.toml"))
 
 
-def test_the_six_scenarios_exist():
+def test_the_ten_scenarios_exist():
     names = {p.stem for p in SCENARIOS}
-    assert names == {"empty_room", "one_person", "three_people", "six_people", "lamps_switching", "fisheye_office"}
+    assert names == {"empty_room", "one_person", "three_people", "six_people", "lamps_switching", "fisheye_office",
+                     "standing_start", "stops_a_minute", "chair_moved", "two_spectra"}
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
@@ -44,6 +46,37 @@ def test_lamp_switching_times():
     assert [bool(v) for v in li.lamp_on(10.0)] == [True, True, True]
 
 
+def test_first_pause_and_stops():
+    _, sc = load_scenario(CONFIGS / "scenarios" / "stops_a_minute.toml")
+    assert [float(v) for v in sc.crowd.first_pause] == [0.0, 0.0]
+    assert sc.crowd.stop_start.shape == (3, 1)
+    assert float(sc.crowd.stop_start[0, 0]) == 6.0 and float(sc.crowd.stop_end[0, 0]) == 72.0
+    assert np.all(np.isinf(np.asarray(sc.crowd.stop_start[1:])))
+    _, sc = load_scenario(CONFIGS / "scenarios" / "standing_start.toml")
+    assert [float(v) for v in sc.crowd.first_pause] == [4.0, 12.0] and sc.crowd.stop_start.shape == (3, 0)
+
+
+def test_moving_furniture():
+    _, sc = load_scenario(CONFIGS / "scenarios" / "chair_moved.toml")
+    fu = sc.furniture
+    assert fu.moving == (3,) and fu.arrangements == 2
+    assert float(fu.move_at[3]) == 8.0 and np.all(np.isinf(np.asarray(fu.move_at[:3])))
+    np.testing.assert_allclose(np.asarray(fu.moved_lo[3]), [-0.9, 0.8])
+    assert [int(fu.arrangement(t)) for t in (0.0, 7.99, 8.0, 60.0)] == [0, 0, 1, 1]
+    lo, hi = fu.placed(1)
+    np.testing.assert_allclose(np.asarray(hi[3] - lo[3]), [0.5, 0.5])
+    assert fu.footprints()[0].shape == (5, 2)
+    np.testing.assert_allclose(np.asarray(fu.moved_centres()), [[0.85, 1.05], [-0.65, 1.05]])
+
+
+def test_lamp_spectra_default_to_the_shared_one():
+    _, sc = load_scenario(CONFIGS / "scenarios" / "three_people.toml")
+    np.testing.assert_array_equal(np.asarray(sc.lighting.lamp_spectrum), np.tile(sc.lighting.spectrum, (3, 1)))
+    _, sc = load_scenario(CONFIGS / "scenarios" / "two_spectra.toml")
+    np.testing.assert_allclose(np.asarray(sc.lighting.lamp_spectrum),
+                               [[0.80, 0.90, 1.0], [1.0, 0.85, 0.65], [1.0, 0.85, 0.65]])
+
+
 def test_noise_sigma_defaults_to_the_rigs(paper_rig):
     _, sc = load_scenario(CONFIGS / "scenarios" / "one_person.toml")
     assert float(sc.sensor.noise_sigma) == float(paper_rig.detection.sensor_sigma)
@@ -62,10 +95,11 @@ def _edit(d: dict, dotted: str, value) -> dict:
     *path, last = dotted.split(".")
     for p in path:
         node = node[int(p)] if isinstance(node, list) else node[p]
+    key = int(last) if isinstance(node, list) else last
     if value is _DELETE:
-        del node[last]
+        del node[key]
     else:
-        node[last] = value
+        node[key] = value
     return d
 
 
@@ -78,6 +112,21 @@ BAD = [
     ("people.count", -1, "people.count"),
     ("people.count", "3", "people.count"),
     ("people.speed", [1.4, 0.8], "people: speed must be [low, high]"),
+    ("people.first_pause", [12.0, 4.0], "people: first_pause must be [low, high]"),
+    ("people.first_pause", [-1.0, 4.0], "people.first_pause.0"),
+    ("people.stops", [{"person": 1, "at_s": 1.0, "seconds": 2.0}], "people.stops.0.person: 1 is not a person"),
+    ("people.stops", [{"person": 0, "at_s": 1.0, "seconds": 0.0}], "people.stops.0.seconds"),
+    ("people.stops", [{"person": 0, "at_s": 1.0}], "people.stops.0.seconds: missing key"),
+    ("people.stops", [{"person": 0, "at_s": 1.0, "seconds": 5.0}, {"person": 0, "at_s": 3.0, "seconds": 1.0}],
+     "people.stops.1: overlaps people.stops.0"),
+    ("lighting.lamps.0.spectrum", [1.0, 0.0, 0.5], "lighting.lamps.0.spectrum.1"),
+    ("lighting.lamps.0.spectrum", [1.0, 0.9], "lighting.lamps.0.spectrum"),
+    ("furniture.2.move_at_s", 8.0, "furniture.2: move_at_s and moved_to go together"),
+    ("furniture.2.moved_to", [0.0, 1.0], "furniture.2: move_at_s and moved_to go together"),
+    ("furniture.2", {"corner_min": [-2.6, -0.9], "corner_max": [-1.6, 0.3], "height": 0.74,
+                     "colour": [0.5, 0.5, 0.5], "move_at_s": 8.0, "moved_to": [2.9, 0.0]},
+     "furniture.2.moved_to"),
+    ("furniture.2.move_at_s", -1.0, "furniture.2.move_at_s"),
     ("lighting.spectrum", [1.0, 0.0, 0.5], "lighting.spectrum.1"),
     ("lighting.lamps.0.position", [-2.4, -1.2, 3.5], "lighting.lamps.0.position"),
     ("lighting.lamps.0.position", [9.0, 0.0, 2.9], "lighting.lamps.0.position"),
