@@ -17,7 +17,9 @@ camera and write to DIR:
                           r_f (px), theta_f (rad) of the true foot, pixel, r_inner,
                           r_head, H_p_m, R_h_m, in_image, foot_visible, area_px, moving}]
   world.json              the true rig drawn from the configured one (docs/design.md section 5),
-                          the people (sizes, colours, contrast against the floor), the sensor
+                          the people (sizes, colours, contrast against the floor), the sensor,
+                          the lamps (with their spectra), the furniture that moves (both
+                          footprint centres, the time)
   frames/NNNNNN.png       every K-th frame with --png-every K
   foveal/NNNNNN_pI.png    with --foveal-every K: the PTZ aimed exactly at each person's
                           true head (true rig, eq 1-4) at --foveal-zoom

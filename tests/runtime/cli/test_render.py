@@ -45,6 +45,22 @@ def test_render_writes_video_truth_and_world(tmp_path, capsys, six_world):
     assert not list(tmp_path.glob(".r.partial*"))
 
 
+def test_render_by_name_records_moved_furniture_and_lamp_spectra(tmp_path, capsys):
+    """A scenario named without its path; ``--seed`` overrides the file's; world.json lists the moved
+    chair (both footprint centres, the time) and every lamp's spectrum."""
+    out = tmp_path / "r"
+    code = main(["render", "--scenario", "chair_moved", "--frames", "2", "--out", str(out), "--seed", "12"])
+    assert code == 0, capsys.readouterr().err
+    world = json.loads((out / "world.json").read_text())
+    assert world["scenario"] == "chair moved" and world["seed"] == 12
+    [moved] = world["moved_furniture"]
+    assert moved["index"] == 3 and moved["at_s"] == 8.0 and moved["height_m"] == pytest.approx(0.9)
+    assert moved["from_m"] == pytest.approx([0.85, 1.05]) and moved["to_m"] == pytest.approx([-0.65, 1.05])
+    assert moved["size_m"] == pytest.approx([0.5, 0.5])
+    assert [lamp["spectrum"] for lamp in world["lamps"]] == [pytest.approx([1.0, 0.93, 0.80])] * 3
+    assert world["ambient_spectrum"] == pytest.approx([1.0, 0.93, 0.80])
+
+
 @pytest.mark.parametrize("args,expect", [
     (["--frames", "0"], "--frames"),
     (["--frames", "10000000"], "--frames"),
