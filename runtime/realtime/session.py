@@ -87,6 +87,9 @@ class Annotator:
     sinks: list = field(default_factory=list)
     loop: RealTimeLoop | None = None
     last: np.ndarray | None = None
+    #: the latest frame's annotated omni image and PTZ inset (with its label), apart (the console shows them)
+    omni_view: np.ndarray | None = None
+    inset: tuple[np.ndarray | None, str] = (None, "PTZ")
 
     def __post_init__(self):
         self.r_range = polar_range(self.rig)
@@ -112,7 +115,8 @@ class Annotator:
         lines = [(f"{n / elapsed:5.1f} fps   latency {np.median(lat) if lat.size else float('nan'):5.2f} ms", WHITE),
                  (f"tracks {len(tracks)}   faces captured {status['captures']}", WHITE)]
         if command is not None:
-            lines.append((f"target #{command.track}  pan {math.degrees(command.pan):6.1f}  "
+            who = "manual" if command.track is None else f"target #{command.track}"
+            lines.append((f"{who}  pan {math.degrees(command.pan):6.1f}  "
                           f"tilt {math.degrees(command.tilt):5.1f}", ORANGE))
             lines.append((f"zoom x{command.zoom:4.1f} ({loop.cfg.zoom_rule}, p={float(self.rig.p_contain):.2f})",
                           ORANGE))
@@ -130,6 +134,7 @@ class Annotator:
         lines.append((f"faults: broken {counts['broken']}  size {counts['wrong_size']}  "
                       f"stale {status['capture']['stale']}", RED if faults else GREY))
         clock = f"frame {frame.index:6d}   t {frame.stamp:8.2f} s"
+        self.omni_view, self.inset = img, (inset, inset_label)
         self.last = compose_view(img, inset, self.title, clock, lines, inset_label)
         for sink in self.sinks:
             sink(self.last)
