@@ -62,7 +62,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from runtime.cli._options import load_ptz_profile, loop_config, parse_faults
+    from runtime.cli._options import console_and_events, load_ptz_profile, loop_config, parse_faults
     from runtime.errors import UsageError
 
     config = loop_config(args)
@@ -76,22 +76,40 @@ def run(args: argparse.Namespace) -> int:
 
     from runtime.files import load_rig
     from runtime.frames import FolderSource, SourceError, open_source
-    from runtime.ptz import PtzError, make_driver
-    from runtime.realtime.session import run_session
+    from runtime.ptz.profile import DEFAULT_PROFILES
+    from runtime.ptz.transports import required_protocol
     from runtime.realtime.sources import FaultySource
 
     rig = load_rig(args.config)
-    from runtime.ptz.onvif import redact
-    from runtime.ptz.transports import required_protocol
-
     profile = load_ptz_profile(args.ptz_profile, required_protocol(args.ptz) if args.ptz else None)
-    try:
-        source = open_source(args.source, args.fps)
-    except SourceError as exc:
-        raise UsageError(str(exc)) from None
-    if not plan.empty:
-        source = FaultySource(source, plan)
-    pace = args.pace or ("all" if isinstance(source, FolderSource) and args.fps is None else "live")
+    with console_and_events(args, Path(args.config), args.ptz_profile or DEFAULT_PROFILES[profile.protocol]) as (
+            console, mqtt):
+        try:
+            source = open_source(args.source, args.fps)
+        except SourceError as exc:
+            raise UsageError(str(exc)) from None
+        if not plan.empty:
+            source = FaultySource(source, plan)
+        pace = args.pace or ("all" if isinstance(source, FolderSource) and args.fps is None else "live")
+        summary = _run(args, rig, source, profile, config, plan, pace, console, mqtt)
+    lat, p = summary["latency_ms"], summary["ptz"]
+    print(f"{summary['frames']} frames at {summary['fps']:.1f} fps ({summary['stop_reason']}); latency p50 "
+          f"{lat['p50'] or float('nan'):.2f} ms, p99 {lat['p99'] or float('nan'):.2f} ms; "
+          f"PTZ {p['commands']} commands, "
+          f"{p['errors']} errors, {p['reconnects']} reconnects; "
+          + (f"stream {summary['stream']['reconnects']} reconnects; " if "stream" in summary else "")
+          + f"wrote {args.out}", file=sys.stdout)
+    return 0
+
+
+def _run(args, rig, source, profile, config, plan, pace, console, mqtt) -> dict:
+    """Connect the PTZ and run the session (the console, if any, serving meanwhile); its summary."""
+    from runtime.errors import UsageError
+    from runtime.frames import SourceError
+    from runtime.ptz import PtzError, make_driver
+    from runtime.ptz.onvif import redact
+    from runtime.realtime.session import run_session
+
     driver = None
     if args.ptz:
         try:
@@ -101,23 +119,15 @@ def run(args: argparse.Namespace) -> int:
             source.close()
             raise UsageError(f"--ptz: {exc}") from None
     try:
-        summary = run_session(rig, source, Path(args.out), driver=driver, profile=profile, config=config,
-                              paced=pace == "live", background_frames=args.background_frames,
-                              background_step=args.background_step,
-                              video=not args.no_video, record=args.record, title=f"OMNI  {Path(str(args.source)).name}",
-                              extra={"config_file": str(args.config),
-                                     "ptz_url": redact(args.ptz) if args.ptz else None, "pace": pace,
-                                     "faults_injected": plan.describe()})
+        return run_session(rig, source, Path(args.out), driver=driver, profile=profile, config=config,
+                           paced=pace == "live", background_frames=args.background_frames,
+                           background_step=args.background_step,
+                           video=not args.no_video, record=args.record, title=f"OMNI  {Path(str(args.source)).name}",
+                           extra={"config_file": str(args.config),
+                                  "ptz_url": redact(args.ptz) if args.ptz else None, "pace": pace,
+                                  "faults_injected": plan.describe()}, console=console, mqtt=mqtt)
     except SourceError as exc:
         raise UsageError(str(exc)) from None
     finally:
         if driver is not None:
             driver.disconnect()
-    lat, p = summary["latency_ms"], summary["ptz"]
-    print(f"{summary['frames']} frames at {summary['fps']:.1f} fps ({summary['stop_reason']}); latency p50 "
-          f"{lat['p50'] or float('nan'):.2f} ms, p99 {lat['p99'] or float('nan'):.2f} ms; "
-          f"PTZ {p['commands']} commands, "
-          f"{p['errors']} errors, {p['reconnects']} reconnects; "
-          + (f"stream {summary['stream']['reconnects']} reconnects; " if "stream" in summary else "")
-          + f"wrote {args.out}", file=sys.stdout)
-    return 0

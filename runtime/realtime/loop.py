@@ -54,6 +54,7 @@ from runtime.realtime.operator import Operator, OperatorState
 from runtime.realtime.sources import Capture, Frame
 from runtime.realtime.targeting import TargetSelector, can_frame, outside_dead_zone, trust_rule
 from runtime.realtime.tracker import Tracker
+from runtime.realtime.zones import priority_test
 
 #: Timed stages: the control thread's, then the drawing thread's (``draw``: the hooks; ``log``).
 STAGES = ("capture", "control", "track", "aim", "send", "adapt", "draw", "log")
@@ -146,7 +147,7 @@ class RealTimeLoop:
                  on_control: Callable | None = None, operator: Operator | None = None):
         self.rig, self.detector, self.capture = rig, detector, capture
         self.operator = operator
-        self.zones = rig.zones
+        self.zones, self.zones_version = rig.zones, 0
         self.driver, self.profile, self.cfg = driver, profile, config
         self.bg = background
         self.lines = line_background(detector, background)
@@ -156,6 +157,7 @@ class RealTimeLoop:
         #: tracker slots in the compiled step; beyond them the tracks missing longest are dropped (counted)
         self.n_slots = 4 * detector.max_people
         self.selector = TargetSelector(config.target, config.dwell_s, trust_rule(config))
+        self.selector.priority = priority_test(rig)
         self.timings = Timings()
         self.on_frame, self.on_control = on_frame, on_control
         self.log_path = log_path
@@ -282,7 +284,8 @@ class RealTimeLoop:
         if self.operator is not None:
             swap = self.operator.take_zones()
             if swap is not None:  # rebuilt off this thread; same shapes, nothing recompiles
-                self.detector, self.selector.priority, self.zones = swap.detector, swap.priority, swap.zones
+                self.detector, self.selector.priority = swap.detector, swap.priority
+                self.zones, self.zones_version = swap.zones, swap.version
             op = self.operator.state
         tracker = self.tracker
         if len(tracker.tracks) > self.n_slots:  # many false alarms: keep the tracks seen most recently
@@ -344,7 +347,7 @@ class RealTimeLoop:
               "counts": dict(self.counts), "capture": dict(self.capture.counts), "captures": self.selector.captures,
               "driver": None, "held": self.selector.held, "framable": sorted(self._framable),
               "sent": self.sent, "operator": self.operator.state if self.operator is not None else None,
-              "zones": self.zones}
+              "zones": self.zones, "zones_version": self.zones_version}
         if self.driver is not None:
             st["driver"] = {"connected": self.driver.connected, **self.driver.counters}
         return st
