@@ -35,6 +35,14 @@ that frame or the drawing thread had to skip it). Drawing, the video and the log
 run on their own thread: frames it had no time for are skipped, counted and
 listed in summary.json (off_path), never waited for.
 
+DIR/events.jsonl has the events (person appeared, face captured with the PTZ's
+image in DIR/faces/, person left); --mqtt URL publishes them to a broker.
+--serve HOST:PORT serves the operator's console while the demo runs: the live
+view, the status, the controls (choose the target, point the PTZ, pause, home),
+zones (saved into the scenario's rig file), events and a calibration assistant
+(docs/console.md); it prints "serving http://HOST:PORT/?token=TOKEN" on stderr at
+start, and only requests with that token change anything.
+
 Ctrl-C or SIGTERM during start-up (building the world, learning the background,
 compiling: 20-30 s) stops it at once: nothing is written, the emulator is stopped,
 exit code 130. Once the loop runs, they end it and everything is written.

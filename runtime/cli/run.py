@@ -4,6 +4,7 @@ steering a PTZ."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 from pathlib import Path
 
@@ -29,8 +30,15 @@ onvif://[USER:PASSWORD@]HOST[:PORT] (ONVIF; the password is never printed or
 logged); without it commands are computed and logged only.
 Ctrl-C or SIGTERM: the PTZ goes home, the summary is written, nothing is lost.
 
-Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line per frame)
-and DIR/annotated.mp4 (the operator's view; --no-video to skip it).
+Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line per frame),
+DIR/events.jsonl (person appeared, face captured, left; faces in DIR/faces/ with
+--ptz-video) and DIR/annotated.mp4 (the operator's view; --no-video to skip it).
+
+--serve HOST:PORT serves the operator's console: the live view, the status, the
+controls (choose the target, point the PTZ, pause, home), zones saved into the
+--config file, events and a calibration assistant (docs/console.md); it prints
+"serving http://HOST:PORT/?token=TOKEN" on stderr at start, and only requests
+with that token change anything. --mqtt URL publishes the events to a broker.
 """
 
 
@@ -52,6 +60,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="live: frames at the source's rate, late ones dropped; all: every frame as fast as "
                         "possible (default: live for cameras and videos, all for image folders)")
     p.add_argument("--fps", type=finite_float, metavar="F", help="frame rate of an image folder")
+    p.add_argument("--ptz-video", metavar="SOURCE",
+                   help="the PTZ camera's own video (stream URL, camera index or file): shown in the operator's view "
+                        "and the console, and saved as the face when one is captured (default: none)")
     p.add_argument("--background-frames", type=int, metavar="N",
                    help="frames to learn the background from (default: [detection] background_frames)")
     p.add_argument("--background-step", type=int, default=1, metavar="K",
@@ -105,10 +116,11 @@ def run(args: argparse.Namespace) -> int:
 def _run(args, rig, source, profile, config, plan, pace, console, mqtt) -> dict:
     """Connect the PTZ and run the session (the console, if any, serving meanwhile); its summary."""
     from runtime.errors import UsageError
-    from runtime.frames import SourceError
+    from runtime.frames import SourceError, open_source
     from runtime.ptz import PtzError, make_driver
     from runtime.ptz.onvif import redact
     from runtime.realtime.session import run_session
+    from runtime.realtime.sources import LatestImage
 
     driver = None
     if args.ptz:
@@ -118,14 +130,24 @@ def _run(args, rig, source, profile, config, plan, pace, console, mqtt) -> dict:
         except PtzError as exc:
             source.close()
             raise UsageError(f"--ptz: {exc}") from None
+    ptz_view = contextlib.nullcontext()
+    if args.ptz_video:
+        try:
+            ptz_view = LatestImage(open_source(args.ptz_video))
+        except SourceError as exc:
+            source.close()
+            if driver is not None:
+                driver.disconnect()
+            raise UsageError(f"--ptz-video: {exc}") from None
     try:
-        return run_session(rig, source, Path(args.out), driver=driver, profile=profile, config=config,
-                           paced=pace == "live", background_frames=args.background_frames,
-                           background_step=args.background_step,
-                           video=not args.no_video, record=args.record, title=f"OMNI  {Path(str(args.source)).name}",
-                           extra={"config_file": str(args.config),
-                                  "ptz_url": redact(args.ptz) if args.ptz else None, "pace": pace,
-                                  "faults_injected": plan.describe()}, console=console, mqtt=mqtt)
+        with ptz_view as foveal:
+            return run_session(rig, source, Path(args.out), driver=driver, profile=profile, config=config,
+                               paced=pace == "live", background_frames=args.background_frames,
+                               background_step=args.background_step, video=not args.no_video, record=args.record,
+                               title=f"OMNI  {Path(str(args.source)).name}", foveal=foveal,
+                               extra={"config_file": str(args.config),
+                                      "ptz_url": redact(args.ptz) if args.ptz else None, "pace": pace,
+                                      "faults_injected": plan.describe()}, console=console, mqtt=mqtt)
     except SourceError as exc:
         raise UsageError(str(exc)) from None
     finally:

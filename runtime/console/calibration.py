@@ -17,12 +17,16 @@ import json
 import math
 import os
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 #: Clicks closer than this (px) are the same floor position.
 SAME_POSITION_PX = 6.0
+#: Longest wait (s) for the loop to send the operator's latest pointing before the PTZ is read.
+SENT_S = 5.0
 #: The readings' sigmas written into observations.json (docs/calibration.md).
 SIGMA_PTZ_DEG, SIGMA_HEIGHT_M = 0.1, 0.005
 
@@ -31,8 +35,9 @@ class CalibrationAssistant:
     """See the module docstring. ``driver``/``profile``: the loop's PTZ (``None``: no PTZ, nothing to read)."""
 
     def __init__(self, rig, rig_path: Path | None, folder: Path, driver=None, profile=None,
-                 profile_spec: str | None = None):
+                 profile_spec: str | None = None, sent: Callable[[], bool] | None = None):
         self.rig, self.rig_path, self.folder = rig, rig_path, Path(folder)
+        self.sent = sent or (lambda: True)
         self.driver, self.profile, self.profile_spec = driver, profile, profile_spec
         self.positions: list[dict] = []
         self.result: dict | None = None
@@ -54,6 +59,9 @@ class CalibrationAssistant:
         r, theta = (float(v) for v in omni.to_polar(x, y))
         if r >= float(omni.rim):
             raise ValueError(f"({x:g}, {y:g}) lies outside the image circle (rim {float(omni.rim):g} px)")
+        deadline = time.monotonic() + SENT_S
+        while not self.sent() and time.monotonic() < deadline:  # the loop takes a new pointing at its next frame
+            time.sleep(0.02)
         self.driver.wait_reached(3.0)
         try:
             pos = self.driver.query_position(2.0)

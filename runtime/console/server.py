@@ -148,11 +148,21 @@ class Console:
         self.zones, self.zones_version = tuple(rig.zones), 0
         self.live = LiveView(rig, annotator, loop)
         self.calibration = CalibrationAssistant(rig, self.rig_path, stage / "calibration", driver, profile,
-                                                self.profile_spec)
+                                                self.profile_spec, self._pointing_sent)
         cx, cy = (float(v) for v in rig.omni.center)  # compile the floor click's aim now, not on the first click
         threading.Thread(target=_aim_at_pixel, args=(rig, loop.cfg.zoom_rule, cx + 0.3 * float(rig.omni.r_m), cy),
                          name="omnijax-console-warm-up", daemon=True).start()
         return self.live
+
+    def _pointing_sent(self) -> bool:
+        """Whether the latest frame the drawing thread saw had the operator's manual pointing sent."""
+        point = self.operator.state.pointing(_now())
+        snap = self.live.snapshot if self.live is not None else None
+        if point is None or snap is None:
+            return point is None
+        sent = _sent(snap)
+        return sent is not None and all(abs(a - b) < 1e-4 for a, b in zip(sent[:2], point[:2])) \
+            and abs(sent[2] - point[2]) < 1e-3
 
     def _serve(self) -> None:
         try:

@@ -65,3 +65,25 @@ def test_mqtt_urls(url, expected):
 def test_bad_mqtt_urls_say_what_was_expected(url):
     with pytest.raises(ValueError, match="expected mqtt://"):
         parse_mqtt_url(url)
+
+
+def test_latest_image_shows_the_newest_frame_of_a_second_video():
+    """``run --ptz-video``: the PTZ camera's own video beside the loop, its newest frame shown (the last one
+    while nothing new comes)."""
+    import time
+
+    from runtime.frames import Source
+    from runtime.realtime.sources import LatestImage
+
+    class Frames(Source):
+        fps, name = 50.0, "ptz"
+
+        def frames(self):
+            for k in range(5):
+                yield np.full((4, 6, 3), k, np.uint8)
+
+    with LatestImage(Frames()) as view:
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and (view()[0] is None or view.image[0, 0, 0] != 4):
+            time.sleep(0.02)
+        assert view.image[0, 0, 0] == 4 and view()[0][0, 0, 0] == 4
