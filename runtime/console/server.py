@@ -21,6 +21,7 @@ import secrets
 import socket
 import sys
 import threading
+import time
 from importlib import resources
 from pathlib import Path
 
@@ -156,7 +157,7 @@ class Console:
 
     def _pointing_sent(self) -> bool:
         """Whether the latest frame the drawing thread saw had the operator's manual pointing sent."""
-        point = self.operator.state.pointing(_now())
+        point = self.operator.state.pointing(time.monotonic())
         snap = self.live.snapshot if self.live is not None else None
         if point is None or snap is None:
             return point is None
@@ -346,7 +347,7 @@ class Console:
         if not body or set(body) - known:
             raise ApiError(400, f"expected some of {sorted(known)}, got {sorted(body)}")
         st = self.operator.state
-        cur = st.pointing(_now()) or _sent(snap) or self.loop.cfg.home
+        cur = st.pointing(time.monotonic()) or _sent(snap) or self.loop.cfg.home
         pan = math.radians(self._number(body, "pan_deg")) if "pan_deg" in body else cur[0]
         tilt = math.radians(self._number(body, "tilt_deg")) if "tilt_deg" in body else cur[1]
         zoom = self._number(body, "zoom") if "zoom" in body else cur[2]
@@ -458,12 +459,6 @@ class Console:
         except ValueError as exc:
             raise ApiError(422, str(exc)) from None
         return web.json_response(self.calibration.report())
-
-
-def _now() -> float:
-    import time
-
-    return time.monotonic()
 
 
 def _sent(snap) -> tuple[float, float, float] | None:

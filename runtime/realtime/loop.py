@@ -347,7 +347,7 @@ class RealTimeLoop:
               "counts": dict(self.counts), "capture": dict(self.capture.counts), "captures": self.selector.captures,
               "driver": None, "held": self.selector.held, "framable": sorted(self._framable),
               "sent": self.sent, "operator": self.operator.state if self.operator is not None else None,
-              "zones": self.zones, "zones_version": self.zones_version}
+              "zones_version": self.zones_version}
         if self.driver is not None:
             st["driver"] = {"connected": self.driver.connected, **self.driver.counters}
         return st
