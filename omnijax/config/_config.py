@@ -40,6 +40,7 @@ from ._schema import (
     validate,
     within,
 )
+from ._zones import MAX_ZONES, Zone, ZoneSection, zones_in_image
 
 # --------------------------------------------------------------------------------------
 # Kernel-side types
@@ -224,6 +225,9 @@ class Rig(eqx.Module):
     p_contain: Float[Array, ""]
     layout: LayoutSearch
     zoom_rule: ZoomRule = eqx.field(static=True)
+    #: ``[[zones]]`` of the omni image (:mod:`omnijax.config._zones`): static, read when the detector
+    #: and the target selector are built, never traced.
+    zones: tuple[Zone, ...] = eqx.field(static=True, default=())
 
     def input_mean(self, r_f, theta_f) -> Float[Array, "*b 9"]:
         """The input vector x of the pointing geometry, in :data:`INPUT_NAMES` order.
@@ -490,6 +494,8 @@ class RigFile(Section):
     zoom: ZoomSection
     room: RoomSection
     layout: LayoutSection = Field(default_factory=LayoutSection)
+    zones: Annotated[list[ZoneSection], Len(0, MAX_ZONES)] = Field(
+        default_factory=list, description="[[zones]] of the omni image (optional)")
 
     @model_validator(mode="after")
     def _geometry(self):
@@ -676,4 +682,5 @@ def parse_rig(
     return Rig(
         omni=omni, foveal=foveal, person=person, sigmas=sigmas, detection=detection, room=room,
         p_contain=_a(f.zoom.p_contain), layout=_layout_search(f, source), zoom_rule=f.zoom.rule,
+        zones=zones_in_image(f.zones, omni.image_size, source),
     )
