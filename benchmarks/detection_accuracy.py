@@ -31,19 +31,18 @@ from scipy import stats
 from tqdm import tqdm
 
 from omnijax import (
-    adapt_background,
     build_detector,
     change_image,
     detect,
     detection_sigmas,
     learn_background,
-    line_background,
     polar_range,
-    sector_mask,
 )
 from omnijax.geometry import wrap_pi
 from omnijax.world import build_world, parse_scenario
 from runtime.files import load_rig, load_scenario, read_toml
+from runtime.realtime.perception import BackgroundKeeper
+from runtime.realtime.targeting import TrustRule
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "configs" / "scenarios"
 
@@ -75,18 +74,17 @@ def run_scenario(name: str, n_frames: int, measure: str, seed: int, stride: int 
     det = build_detector(rig, measure=measure)
     r0, r1 = polar_range(rig)
     bg = learn_background(np.stack([np.asarray(world.frame(i).image) for i in range(0, start, learn_every)]))
-    lines = line_background(det, bg)
-    W, H = rig.omni.image_size
-    theta_map = rig.omni.to_polar(*np.meshgrid(np.arange(W), np.arange(H)))[1]
+    # the background's life as the loop runs it, without a tracker (nobody is trusted: fine for runs
+    # shorter than [detection] absorb_s)
+    keeper = BackgroundKeeper(rig, det, bg, TrustRule(), float(scenario.fps), learn_n, stride)
     people, false, frames_with_false, lines_above, n_lines = [], 0, 0, 0, 0
     for t in tqdm(range(start, start + n_frames * stride, stride), desc=f"{name} ({measure})", leave=False):
         f = world.frame(t)
-        d, trace = detect(det, f.image, bg, lines)
+        d, trace = detect(det, f.image, keeper.lines)
         M = np.asarray(trace.M)
         lines_above += int((M > np.asarray(det.thresholds.lower)).sum())
         n_lines += M.size
-        bg = adapt_background(bg, f.image, ~sector_mask(theta_map, d), float(rig.detection.adapt_rate))
-        lines = line_background(det, bg)
+        keeper.update(f.image, d, trace.d2, np.zeros(d.valid.shape, bool))
         tr = f.truth
         valid = np.nonzero(np.asarray(d.valid))[0]
         rule_r, rule_t = (np.asarray(a) for a in detection_sigmas(rig, d.sigma_r_f, d.sigma_theta_f))

@@ -61,7 +61,7 @@ def score_lines(rig, truth_lines: list[dict], world: dict, det_lines: list[dict]
                 moved_furniture=()) -> dict:
     history = History.from_truth_lines(truth_lines, world, learning_frames, moved_furniture)
     by_frame = {t["frame"]: t for t in truth_lines}
-    score = PerceptionScore()
+    score = PerceptionScore(blind_radius_m=float(rig.detection.min_floor_radius))
     for d in det_lines:
         z, sig = floor_and_sigmas(rig, d["people"])
         score.add_frame(d["frame"], by_frame[d["frame"]], d["people"], z, sig, history)
@@ -116,7 +116,7 @@ def sweep(args) -> list[dict]:
         s = score_lines(rig, truth_lines, world_summary(world), det_lines, result.learning_frames,
                         getattr(world, "moved_furniture", ()))
         rows.append({"scene": scene, "seed": seed, "seconds": time.perf_counter() - t0,
-                     "learned_share": result.learned_share, **s})
+                     "life": result.perception.keeper.summary(), **s})
     return rows
 
 

@@ -5,7 +5,8 @@ Pure functions of arrays and config PyTrees, one concept per subpackage:
 - ``omnijax.config``: the rig's TOML schema and the :class:`Rig` PyTree every kernel takes;
 - ``omnijax.camera``: omnidirectional camera models (paraboloid, fisheyes, OCamCalib), r <-> phi;
 - ``omnijax.geometry``: eq 1-4, image radius -> floor -> pan/tilt, and floor <-> image conversions;
-- ``omnijax.detection``: chromaticity, change measure, background, polar indexing, the foot (eq 5-12);
+- ``omnijax.detection``: chromaticity, change measure, background and its life, polar indexing, the
+  people and their feet (eq 5-12);
 - ``omnijax.uncertainty``: the pointing covariance by four methods (eq 13-14, GUM);
 - ``omnijax.zoom``: eq 15 and the calibrated zoom rule;
 - ``omnijax.aiming``: the one aim pipeline, from detections to pan/tilt/zoom;
@@ -97,16 +98,15 @@ from .detection import (
     chromaticity_covariance as chromaticity_covariance,
     detect as detect,
     estimate_sensor_noise as estimate_sensor_noise,
-    foot_estimate as foot_estimate,
     foot_scores as foot_scores,
     foot_sigma_mc as foot_sigma_mc,
     grey_change_measure as grey_change_measure,
     hysteresis_sectors as hysteresis_sectors,
     learn_background as learn_background,
     line_background as line_background,
+    live_step as live_step,
     polar_range as polar_range,
-    sector_mask as sector_mask,
-    window_profile as window_profile,
+    start_life as start_life,
 )
 from .geometry import (
     D_P_MIN as D_P_MIN,

@@ -246,6 +246,18 @@ def open_source(spec: str, fps: float | None = None) -> Source:
                       f"({', '.join(s + '://' for s in NETWORK_SCHEMES)})")
 
 
+def frames_fps(source: str | Path) -> float | None:
+    """The frame rate a video file declares (``None`` for a folder of images, or a video that does not say)."""
+    path = Path(source)
+    if not path.is_file():
+        return None
+    reader = VideoSource(path, max_broken=0)
+    try:
+        return reader.fps
+    finally:
+        reader.close()
+
+
 def read_frames(source: str | Path, limit: int | None = None) -> Iterator[np.ndarray]:
     """Yield RGB uint8 frames (H, W, 3) from a video file or a folder of images, in order, at most ``limit``.
 

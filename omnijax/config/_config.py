@@ -155,9 +155,9 @@ class Detection(eqx.Module):
     sigma_gain_theta_f: Float[Array, ""] = eqx.field(default=1.0, converter=jnp.asarray)
     sigma_extra_theta_f: Float[Array, ""] = eqx.field(default=0.0, converter=jnp.asarray)
     background_seconds: float = eqx.field(static=True, default=10.0)
-    recent_s: float = eqx.field(static=True, default=0.4)
-    ghost_s: float = eqx.field(static=True, default=0.3)
-    ghost_edge: float = eqx.field(static=True, default=4.0)
+    still_s: float = eqx.field(static=True, default=0.3)
+    ghost_s: float = eqx.field(static=True, default=0.4)
+    ghost_edge: float = eqx.field(static=True, default=6.0)
     absorb_s: float = eqx.field(static=True, default=60.0)
 
 
@@ -411,15 +411,17 @@ class DetectionSection(Section):
         10.0, description="span of the learning frames, s (0: consecutive frames)")
     adapt_rate: Annotated[float, Field(ge=0, lt=1)] = Field(
         0.02, description="drift: update rate per frame of unchanged pixels outside every detection")
-    recent_s: Annotated[float, within(0.0, 60.0, "seconds", open_low=True, why="a minute")] = Field(
-        0.4, description="time constant of the short-term average a repaired pixel takes, s")
+    still_s: Annotated[float, within(0.0, 60.0, "seconds", why="a minute")] = Field(
+        0.3, description="a changed sample must stay still this long before a ghost's repair takes it, s")
     ghost_s: Annotated[float, within(0.0, 60.0, "seconds", why="a minute")] = Field(
-        0.3, description="a static detection with no object edge this long is a ghost and re-learnt, s")
+        0.4, description="a changed sample inside a ghost (a detection with no object edge) this long is "
+                         "re-learnt, s")
     ghost_edge: Annotated[float, within(0.0, 1e6, "a mean d^2", open_low=True,
                                         why="an edge so strong no object has it")] = Field(
-        4.0, description="object-edge test: mean d^2 across the sector's edge below this is no edge")
+        6.0, description="object-edge test: mean least d^2 across a person's edge below this is no edge")
     absorb_s: Annotated[float, within(0.0, 86400.0, "seconds", open_low=True, why="a day")] = Field(
-        60.0, description="an object standing still with no trusted track is absorbed after this, s")
+        60.0, description="what stays changed and still this long, outside every trusted person, is "
+                          "learnt as background, s")
     foot_mc_profiles: Annotated[int, Field(ge=16, le=4096)] = Field(
         256, description="Monte Carlo profiles per table cell of sigma_r_f")
 
@@ -675,7 +677,7 @@ def parse_rig(
         sigma_gain_r_f=_a(de.sigma_gain_r_f), sigma_extra_r_f=_a(de.sigma_extra_r_f),
         sigma_gain_theta_f=_a(de.sigma_gain_theta_f),
         sigma_extra_theta_f=_a(math.radians(de.sigma_extra_theta_f_deg)),
-        background_seconds=de.background_seconds, recent_s=de.recent_s, ghost_s=de.ghost_s,
+        background_seconds=de.background_seconds, still_s=de.still_s, ghost_s=de.ghost_s,
         ghost_edge=de.ghost_edge, absorb_s=de.absorb_s,
     )
     room = Room(outline=_a(f.room.outline), exclude=tuple(_a(p) for p in f.room.exclude))

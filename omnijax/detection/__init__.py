@@ -1,15 +1,11 @@
-"""The people detector: chromaticity, change measure, background and its life, polar indexing, the foot (eq 5-12)."""
+"""The people detector: chromaticity, change measure, background and its life, polar indexing, the people
+and their feet (eq 5-12)."""
 
-from ._background import (
-    CHANGED as CHANGED,
-    BackgroundLife as BackgroundLife,
-    PixelPolar as PixelPolar,
-    detection_regions as detection_regions,
-    ghost_evidence as ghost_evidence,
-    learned_share as learned_share,
-    live_step as live_step,
-    pixel_polar as pixel_polar,
-    start_life as start_life,
+from ._blobs import (
+    People as People,
+    find_people as find_people,
+    merge_fragments as merge_fragments,
+    window_sums as window_sums,
 )
 from ._change import (
     MEASURES as MEASURES,
@@ -20,6 +16,7 @@ from ._change import (
     estimate_sensor_noise as estimate_sensor_noise,
     grey_change_measure as grey_change_measure,
     learn_background as learn_background,
+    learned as learned,
 )
 from ._chroma import (
     chromaticity as chromaticity,
@@ -35,13 +32,12 @@ from ._detector import (
     find_sectors as find_sectors,
     line_background as line_background,
     line_change as line_change,
-    locate_feet as locate_feet,
-    sector_mask as sector_mask,
+    lines_from as lines_from,
+    locate_people as locate_people,
     with_zones as with_zones,
 )
 from ._foot import (
     FootSigmaTable as FootSigmaTable,
-    foot_estimate as foot_estimate,
     foot_scores as foot_scores,
     foot_sigma_mc as foot_sigma_mc,
 )
@@ -51,7 +47,17 @@ from ._indexing import (
     chi2_variate as chi2_variate,
     hysteresis_sectors as hysteresis_sectors,
     noncentral_chi2_variate as noncentral_chi2_variate,
-    window_profile as window_profile,
+)
+from ._life import (
+    CHANGED as CHANGED,
+    Evidence as Evidence,
+    Life as Life,
+    LifeRates as LifeRates,
+    ghost_evidence as ghost_evidence,
+    learned_share as learned_share,
+    live_step as live_step,
+    regions as regions,
+    start_life as start_life,
 )
 from ._polar import (
     PolarIndex as PolarIndex,

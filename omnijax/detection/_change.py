@@ -54,9 +54,19 @@ def estimate_sensor_noise(frames: UInt8[ArrayLike, "N H W 3"], floor=0.5, pool: 
     return jnp.sqrt(jnp.maximum(var, jnp.asarray(floor, jnp.float32) ** 2))
 
 
+#: A learning sample agrees with the pixel's median colour when its d^2 against it is under the
+#: chi-square(2) 1 - 1e-3 quantile.
+AGREE = 13.8155
+
+
 @jax.jit
 def learn_background(frames: UInt8[ArrayLike, "N H W 3"], sigma=None, floor=0.5) -> Background:
-    """Background from N frames: per pixel, the mean of the samples within 3 sigma of the median.
+    """Background from N frames: per pixel, the mean of the samples whose chromaticity agrees with the
+    median colour's (d^2 of eq 6-7 between the two below :data:`AGREE`; people walking or standing
+    through less than half of the frames are left out, and so is nothing that only changes the light's
+    intensity: a lamp switching or a shadow, under one spectrum). ``var_factor = 1 / kept``, so a
+    pixel whose frames agreed less often (``kept`` small: it was occupied for a while) is known to be
+    less certain; :func:`learned` says which pixels agreed in most frames.
 
     ``sigma`` (grey levels, scalar or per pixel) defaults to :func:`estimate_sensor_noise` of
     the frames with the given ``floor``.
@@ -66,11 +76,19 @@ def learn_background(frames: UInt8[ArrayLike, "N H W 3"], sigma=None, floor=0.5)
     sigma = estimate_sensor_noise(frames, floor) if sigma is None else jnp.broadcast_to(
         jnp.asarray(sigma, jnp.float32), (H, W))
     med = _temporal_median(jnp.asarray(frames))
-    keep = jnp.all(jnp.abs(f - med) <= 3 * sigma[..., None], axis=-1, keepdims=True)
+    keep = (change_measure(f, jnp.broadcast_to(med, f.shape), 1.0, sigma) <= AGREE)[..., None]
     n = jnp.maximum(keep.sum(0), 1)
     mean = jnp.where(keep, f, 0.0).sum(0) / n
     mean = jnp.where(keep.any(0), mean, med)
     return Background(mean=mean, var_factor=1.0 / n[..., 0].astype(jnp.float32), sigma=sigma)
+
+
+def learned(var_factor: Float[ArrayLike, "*b"], frames: int, share: float = 2.0 / 3.0) -> Bool[Array, "*b"]:
+    """Samples of a background learnt from ``frames`` frames whose frames agreed in at least ``share``
+    of them (``1 / var_factor`` of them were kept): certainly background. The others were occupied
+    for more than a third of the learning window; the background's life learns them as they are seen
+    unoccupied (:mod:`omnijax.detection._life`)."""
+    return 1.0 / jnp.asarray(var_factor) >= share * frames - 1e-3
 
 
 def _temporal_median(frames: Shaped[Array, "N H W 3"]) -> Float[Array, "H W 3"]:

@@ -4,14 +4,16 @@
 2. d^2 against the background (eq 6-7, corrected),
 3. radial sums ``M(theta)`` (eq 8),
 4. psi1: hysteresis sectors with thresholds from x_f and x_m (eq 9-10, corrected),
-5. psi2: the windowed profile along each sector's centre line,
-6. the Bayes foot estimate (eq 11-12, corrected) with ``theta_f`` (the sector's centre),
-   its sigma from the sector's edges, ``sigma_r_f`` and the person's contrast.
+5. psi2: the windowed profile at every line of the sectors,
+6. the people they hold one at a time (:mod:`omnijax.detection._blobs`: eq 11-12, corrected, per
+   person; beyond the paper, which takes one per sector): each one's foot ``r_f``, ``theta_f`` (the
+   centre of its own run of lines), their sigmas and the person's contrast.
 
 Build a :class:`Detector` once per rig (:func:`build_detector`: thresholds and the
 ``sigma_r_f`` table are simulated there), sample the background at the polar
-lines once per background update (:func:`line_background`), then call
-:func:`detect` per frame; it never recompiles for frames of the same size.
+lines (:func:`line_background`: the detector and the background's life work on the
+polar samples only), then call :func:`detect` per frame; it never recompiles for frames
+of the same size.
 """
 
 from __future__ import annotations
@@ -19,14 +21,15 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float, PRNGKeyArray, UInt8
+from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray, UInt8
 
 from ..camera import OmniCamera
 from ..config import Rig
 from ..geometry import wrap_2pi
+from ._blobs import People, find_people, merge_fragments
 from ._change import MEASURES, Background, ReferenceTerms, change_against, reference_terms
-from ._foot import FootSigmaTable, build_foot_sigma_table, foot_estimate, foot_sigma_lookup
-from ._indexing import Thresholds, build_thresholds, gather_rgb, hysteresis_sectors, window_profile
+from ._foot import FootSigmaTable, build_foot_sigma_table, foot_sigma_lookup
+from ._indexing import Thresholds, build_thresholds, gather_rgb, hysteresis_sectors
 from ._polar import PolarIndex, build_polar_index
 
 
@@ -37,6 +40,7 @@ class Detector(eqx.Module):
     polar: PolarIndex
     thresholds: Thresholds
     foot_sigma: FootSigmaTable
+    sigma_H_p: Float[Array, ""]
     max_people: int = eqx.field(static=True)
     measure: str = eqx.field(static=True, default="chromaticity")
 
@@ -61,7 +65,7 @@ def build_detector(rig: Rig, key: PRNGKeyArray | None = None, measure: str = "ch
         omni=rig.omni, polar=polar, thresholds=build_thresholds(rig, polar, k_th, dps),
         foot_sigma=build_foot_sigma_table(polar, k_foot, rig.detection.foot_mc_profiles, dps,
                                           rig.sigmas.H_p),
-        max_people=rig.detection.max_people, measure=measure,
+        sigma_H_p=jnp.asarray(rig.sigmas.H_p), max_people=rig.detection.max_people, measure=measure,
     )
 
 
@@ -76,7 +80,9 @@ def with_zones(detector: Detector, rig: Rig, key: PRNGKeyArray | None = None) ->
 
 
 class LineBackground(eqx.Module):
-    """The background at the polar line samples (refreshed when the background changes)."""
+    """The background at the polar line samples: its colour, the variance factor of that estimate,
+    the sensor noise, and eq 5's terms of the colour (:func:`line_background`, or the background's
+    life, :mod:`omnijax.detection._life`, which keeps it up to date)."""
 
     mean: Float[Array, "T R 3"]
     var_factor: Float[Array, "T R"]
@@ -86,20 +92,27 @@ class LineBackground(eqx.Module):
 
 @jax.jit
 def line_background(detector: Detector, bg: Background) -> LineBackground:
+    """A learnt (per pixel) background at the polar line samples."""
     idx = detector.polar.line_index
-    mean, var_factor = gather_rgb(bg.mean, idx), bg.var_factor.reshape(-1)[idx]
-    return LineBackground(mean=mean, var_factor=var_factor, sigma=bg.sigma.reshape(-1)[idx],
-                          ref=reference_terms(mean, var_factor))
+    return lines_from(gather_rgb(bg.mean, idx), bg.var_factor.reshape(-1)[idx], bg.sigma.reshape(-1)[idx])
+
+
+def lines_from(mean, var_factor, sigma) -> LineBackground:
+    """A :class:`LineBackground` from its colour, variance factor and noise (eq 5's terms computed)."""
+    return LineBackground(mean=mean, var_factor=var_factor, sigma=sigma, ref=reference_terms(mean, var_factor))
 
 
 class Detections(eqx.Module):
-    """Up to K people (``valid`` marks the real ones), strongest sector first.
+    """Up to K people (``valid`` marks the real ones), strongest first.
 
-    ``r_f`` (px) is the image radius of the person's axis foot, ``theta_f`` (rad) the
-    sector centre; ``sigma_theta_f`` the centre's error (:func:`_foot_sigmas`);
-    ``contrast`` is the per-pixel non-centrality measured along the profile;
-    ``r_in``/``r_out`` (px) the person's radial extent; ``theta_l``/``theta_r`` the
-    sector's edges.
+    ``r_f`` (px) is the image radius of the person's axis foot, ``theta_f`` (rad) the centre of
+    the person's run of lines; ``sigma_r_f``, ``sigma_theta_f`` their errors (:func:`_foot_sigmas`);
+    ``contrast`` is the non-centrality per sample measured on the profile (over the samples no
+    stronger person explained); ``r_in``/``r_out`` (px) the person's radial extent (the foot
+    hypothesis's); ``theta_l``/``theta_r`` the run's edges; ``peak`` the profile's d^2 excess;
+    ``region`` the polar samples the person explained, (first line, last line, first radius
+    index, end radius index), ``last`` may pass ``T - 1``: what the background's life re-learns
+    when the person is a ghost.
     """
 
     valid: Bool[Array, " K"]
@@ -113,158 +126,107 @@ class Detections(eqx.Module):
     theta_l: Float[Array, " K"]
     theta_r: Float[Array, " K"]
     peak: Float[Array, " K"]
+    region: Int[Array, "K 4"]
 
 
 class DetectionTrace(eqx.Module):
-    """Intermediate results, for overlays and characterisation."""
+    """Intermediate results, for the background's life, overlays and characterisation: the radial
+    sums ``M`` (eq 8) and d^2 at every polar sample (0 where a sample does not count)."""
 
     M: Float[Array, " T"]
-    profiles: Float[Array, "K R"]
-    significant: Bool[Array, "K R"]
-
-
-@jax.jit
-def sector_mask(theta_map: Float[Array, "H W"], dets: Detections, margin: float = 0.035) -> Bool[Array, "H W"]:
-    """Pixels whose azimuth lies inside a valid detection's sector widened by ``margin`` (rad):
-    what the background must not learn from."""
-    span = wrap_2pi(dets.theta_r - dets.theta_l) + 2 * margin
-    offset = wrap_2pi(theta_map[..., None] - dets.theta_l + margin)
-    return jnp.any(dets.valid & (offset <= span), axis=-1)
+    d2: Float[Array, "T R"]
 
 
 def line_change(detector: Detector, frame: UInt8[Array, "H W 3"], lines: LineBackground) -> Array:
-    """Steps 1-3: d^2 at every polar sample and the radial sums ``M(theta)``."""
+    """Steps 1-2: d^2 at every polar sample (0 where ``line_ok`` is false)."""
     cur = gather_rgb(frame, detector.polar.line_index).astype(jnp.float32)
     if detector.measure == "chromaticity":
         d2 = change_against(cur, lines.ref, lines.sigma)
     else:
         d2 = MEASURES[detector.measure][0](cur, lines.mean, lines.var_factor, lines.sigma)
-    return jnp.where(detector.polar.line_ok, d2, 0.0).sum(-1)
+    return jnp.where(detector.polar.line_ok, d2, 0.0)
 
 
-def _other_blob(polar, i, significant) -> Array:
-    """Distance (px of image radius) from hypothesis ``i``'s inner end to another blob on the same
-    centre line, 0 if there is none: three consecutive significant samples (noise alone makes one
-    such run in several thousand profiles at x_f = 0.01) more than :data:`BLOB_GAP` samples before
-    the person, or beyond the person's outer end by more than :data:`BLOB_GAP` samples plus
-    :data:`TALLER` of its extent (a taller person than the prior's mean is not a second blob). Two
-    people (or a person and a ghost) at one azimuth and different radii make one sector, and the
-    foot estimate may be either's."""
-    n = significant.shape[-1]
-    run = significant & jnp.roll(significant, -1) & jnp.roll(significant, -2)
-    r = jnp.arange(n)
-    run = run & (r < n - 2)
-    out = polar.hyp_out[i]
-    inner = run & (r < i - BLOB_GAP)
-    outer = run & (r >= out + BLOB_GAP + TALLER * (out - i))
-    d_in = jnp.where(inner.any(), polar.radii[i] - polar.radii[jnp.argmax(inner)], 0.0)
-    d_out = jnp.where(outer.any(), polar.radii[jnp.argmax(outer)] - polar.radii[i], 0.0)
-    return jnp.maximum(d_in, d_out)
-
-
-#: Samples between a person's hypothesis and another blob on its centre line, and the share of the
-#: person's extent a taller person may reach beyond it (:func:`_other_blob`).
-BLOB_GAP, TALLER = 3, 0.2
-
-
-def _foot_sigmas(detector: Detector, i, contrast, width, other=0.0) -> tuple[Array, Array]:
+def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0) -> tuple[Array, Array]:
     """``(sigma_r_f, sigma_theta_f)`` of a detection whose foot hypothesis is ``i``.
 
-    One upright person's image is symmetric about the foot's azimuth, so the sector's
-    centre is unbiased and its error is where the two edges fall inside their lines'
-    bins of width ``step``: uniform, ``step^2 / 12`` each, a quarter of their sum for the
-    mean. (The paper's alternative, the sector width as a 99 % interval, overstates it
-    about tenfold in the synthetic world: docs/detection.md.) The failure modes, by the
-    sector's width against one person's there (a vertical cylinder spans ``2 asin(rho / R)``):
+    One upright person's image is symmetric about the foot's azimuth, so the run's centre is
+    unbiased and its error is where the two edges fall inside their lines' bins of width
+    ``step``: uniform, ``step^2 / 12`` each, a quarter of their sum for the mean. (The paper's
+    alternative, the sector width as a 99 % interval, overstates it about tenfold in the
+    synthetic world: docs/detection.md.) The failure modes, by the run's width against one
+    person's there (a vertical cylinder spans ``2 asin(rho / R)``):
 
-    - wider (two people side by side, a person and a ghost or a shadow): the person sits at
-      one end of the sector, its centre off by half the excess width either way
-      (``excess^2 / 4``; a uniform spread over the excess, ``excess^2 / 12``, is what the
-      synthetic world's merged sectors break: docs/detection.md, "Honest sigmas");
-    - narrower (partly hidden, or only part of a low-contrast person over the threshold):
-      the visible part is anywhere along the person (``deficit^2 / 12``);
-    - either way the centre line may miss the person's axis, so the foot's radius takes a
-      share ``min((excess + deficit) / width_1, 1)`` of a uniform spread over the person's
-      extent on top of the Monte Carlo ``sigma_r_f``; the whole of it when the foot
-      hypothesis is the first or last possible one (the person reaches past the sampled
-      radii: the image's edge or the blind centre).
+    - wider (a person and a ghost or a shadow, two people the valley rule did not part): the
+      person sits at one end of the run, its centre off by half the excess width either way
+      (``excess^2 / 4``);
+    - narrower (partly hidden, or only part of a low-contrast person over the threshold): the
+      visible part is anywhere along the person (``deficit^2 / 12``);
+    - either way the centre line may miss the person's axis, so the foot's radius takes a share
+      ``min((excess + deficit) / width_1, 1)`` of a uniform spread over the person's extent on top
+      of the Monte Carlo ``sigma_r_f``; the whole of it when the foot hypothesis is the first or
+      last possible one (the person reaches past the sampled radii: the image's edge or the blind
+      centre); and the share of the person's window that a stronger person hid (``1 - visible``).
     """
     polar = detector.polar
     step = 2 * jnp.pi / polar.n_theta
     one = polar.hyp_width[i]
     excess = jnp.maximum(width - one - step, 0.0)
     deficit = jnp.maximum(one - width - step, 0.0)
-    sigma_theta = jnp.sqrt(step**2 / 24 + excess**2 / 4 + deficit**2 / 12 + jnp.where(other > 0, width**2 / 12, 0.0))
+    sigma_theta = jnp.sqrt(step**2 / 24 + excess**2 / 4 + deficit**2 / 12)
     extent = (polar.hyp_out[i] - i).astype(jnp.float64)
     ok = polar.hyp_ok
     first, last = jnp.argmax(ok), ok.shape[0] - 1 - jnp.argmax(ok[::-1])
     edge = (i <= first) | (i >= last)
-    share = jnp.where(edge, 1.0, jnp.minimum((excess + deficit) / one, 1.0))
-    sigma_r = jnp.sqrt(foot_sigma_lookup(detector.foot_sigma, i, contrast) ** 2 + share * extent**2 / 12
-                       + other**2)
+    share = jnp.where(edge, 1.0, jnp.minimum((excess + deficit) / one + (1.0 - visible), 1.0))
+    sigma_r = jnp.sqrt(foot_sigma_lookup(detector.foot_sigma, i, contrast) ** 2 + share * extent**2 / 12)
     return sigma_r, sigma_theta
 
 
-def _sector_angles(detector: Detector, sectors):
-    T = detector.polar.n_theta
-    step = 2 * jnp.pi / T
-    theta_l = sectors.first * step
-    theta_r = sectors.last * step
-    centre = wrap_2pi(0.5 * (theta_l + theta_r))
-    width = (sectors.last - sectors.first + 1) * step
-    return wrap_2pi(theta_l), wrap_2pi(theta_r), centre, width
-
-
 def find_sectors(detector: Detector, M: Float[Array, " T"]):
-    """Step 4 (psi1): hysteresis sectors of ``M`` and their edges, centres and widths (rad)."""
-    sectors = hysteresis_sectors(M, detector.thresholds.lower, detector.thresholds.upper, detector.max_people)
-    return (sectors, *_sector_angles(detector, sectors))
+    """Step 4 (psi1): hysteresis sectors of ``M`` (:class:`~omnijax.detection.Sectors`)."""
+    return hysteresis_sectors(M, detector.thresholds.lower, detector.thresholds.upper, detector.max_people)
 
 
-def locate_feet(detector: Detector, frame: UInt8[Array, "H W 3"], bg: Background,
-                found) -> tuple[Detections, Array, Array]:
-    """Steps 5-6 for the sectors ``found`` by :func:`find_sectors`: psi2 profiles and the Bayes foot.
+def sector_lines(sectors, n_theta: int) -> Bool[Array, " T"]:
+    """The lines inside any valid sector."""
+    rel = (jnp.arange(n_theta)[None, :] - sectors.first[:, None]) % n_theta
+    return jnp.any(sectors.valid[:, None] & (rel <= (sectors.last - sectors.first)[:, None]), 0)
 
-    Returns the detections, the profiles and where they are significant.
-    """
-    polar, th = detector.polar, detector.thresholds
-    sectors, theta_l, theta_r, theta_f, width = found
-    def profile(args):
-        theta, ok = args
-        empty = jnp.zeros(polar.n_r, jnp.float32)
-        # one sector at a time, and only the sectors that exist: most frames fill few of the K
-        return jax.lax.cond(ok, lambda: window_profile(frame, bg.mean, bg.var_factor, bg.sigma, detector.omni,
-                                                       polar, theta, detector.measure), lambda: (empty, empty))
 
-    profiles, pixels = jax.lax.map(profile, (theta_f, sectors.valid))
-    i, contrast = jax.vmap(lambda p, n: foot_estimate(p, n, polar, detector.dof_per_sample))(profiles, pixels)
-    out = polar.hyp_out[i]
-    r = jnp.arange(polar.n_r)
-    significant = profiles > th.window
-    on = (r[None] >= i[:, None]) & (r[None] < out[:, None])
-    valid = sectors.valid & jnp.any(significant & on, axis=-1)
-    other = jax.vmap(lambda k, sig: _other_blob(polar, k, sig))(i, significant)
-    sigma_r, sigma_theta = _foot_sigmas(detector, i, contrast, width, other)
-    dets = Detections(
-        valid=valid,
-        r_f=polar.hyp_r_f[i],
-        theta_f=theta_f,
-        sigma_r_f=sigma_r,
-        sigma_theta_f=sigma_theta,
-        contrast=contrast,
-        r_in=polar.radii[i],
-        r_out=polar.radii[0] + out,
-        theta_l=theta_l,
-        theta_r=theta_r,
-        peak=sectors.peak,
+def detections_of(detector: Detector, people: People) -> Detections:
+    """The :class:`Detections` of :func:`~omnijax.detection.find_people`'s people: feet, sigmas,
+    edges; fragments merged (:func:`~omnijax.detection.merge_fragments`)."""
+    polar = detector.polar
+    step = 2 * jnp.pi / polar.n_theta
+    i = people.i
+    width = (people.last - people.first + 1) * step
+    sigma_r, sigma_theta = _foot_sigmas(detector, i, people.contrast, width, people.visible)
+    theta_f = wrap_2pi(people.centre * step)
+    R = polar.hyp_R[i]
+    valid = merge_fragments(people.valid, jnp.stack([R * jnp.cos(theta_f), R * jnp.sin(theta_f)], -1))
+    return Detections(
+        valid=valid, r_f=polar.hyp_r_f[i], theta_f=theta_f, sigma_r_f=sigma_r, sigma_theta_f=sigma_theta,
+        contrast=people.contrast, r_in=polar.radii[i], r_out=polar.radii[0] + polar.hyp_out[i],
+        theta_l=wrap_2pi(people.first * step), theta_r=wrap_2pi(people.last * step), peak=people.excess,
+        region=people.explained,
     )
-    return dets, profiles, significant
+
+
+def locate_people(detector: Detector, d2: Float[Array, "T R"], sectors) -> Detections:
+    """Steps 5-6 in the psi1 ``sectors`` of a frame whose polar d^2 is ``d2``: its people
+    (:func:`~omnijax.detection.find_people`) as :class:`Detections`."""
+    polar, th = detector.polar, detector.thresholds
+    ok = polar.line_ok.astype(d2.dtype)
+    people = find_people(polar, d2, ok, sector_lines(sectors, polar.n_theta), th.window, th.c_min,
+                         detector.dof_per_sample, detector.sigma_H_p, detector.max_people)
+    return detections_of(detector, people)
 
 
 @jax.jit
-def detect(detector: Detector, frame: UInt8[Array, "H W 3"], bg: Background,
+def detect(detector: Detector, frame: UInt8[Array, "H W 3"],
            lines: LineBackground) -> tuple[Detections, DetectionTrace]:
     """Steps 1-6 for one frame: every person's foot (r_f, theta_f) with its sigmas."""
-    M = line_change(detector, frame, lines)
-    dets, profiles, significant = locate_feet(detector, frame, bg, find_sectors(detector, M))
-    return dets, DetectionTrace(M=M, profiles=profiles, significant=significant)
+    d2 = line_change(detector, frame, lines)
+    M = d2.sum(-1)
+    return locate_people(detector, d2, find_sectors(detector, M)), DetectionTrace(M=M, d2=d2)

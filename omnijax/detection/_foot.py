@@ -36,25 +36,10 @@ def foot_scores(profile: Float[Array, " R"], polar: PolarIndex) -> Float[Array, 
     return jnp.where(polar.hyp_ok, score, -jnp.inf)
 
 
-def foot_estimate(profile: Float[Array, " R"], pixels: Float[Array, " R"], polar: PolarIndex,
-                  dof_per_sample: int = 2) -> tuple[Array, Array]:
-    """Best hypothesis index and the person's contrast (non-centrality per pixel) it implies.
-
-    The contrast is the method-of-moments estimate over the person's radii:
-    ``E[d2_bar] = 2 w + w c`` for w window pixels (2 dof per chromaticity pixel).
-    """
-    i = jnp.argmax(foot_scores(profile, polar))
-    r = jnp.arange(profile.shape[0])
-    on = (r >= i) & (r < polar.hyp_out[i])
-    n = jnp.maximum(jnp.sum(jnp.where(on, pixels, 0.0)), 1.0)
-    contrast = (jnp.sum(jnp.where(on, profile, 0.0)) - dof_per_sample * n) / n
-    return i, jnp.maximum(contrast, 0.0)
-
-
 def foot_sigma_mc(polar: PolarIndex, i, contrast, key: PRNGKeyArray, n_profiles: int,
                   dof_per_sample: int = 2, sigma_H_p=0.0) -> Array:
     """Root mean square error (px, of the axis foot's image radius) for a person at ``i``."""
-    w = polar.window_px
+    w = polar.window_n
     r = jnp.arange(w.shape[0])
     kb, ko, kh = jax.random.split(key, 3)
     out = jnp.round(polar.hyp_out[i] + polar.hyp_dout_dH[i] * sigma_H_p * jax.random.normal(kh, (n_profiles, 1)))

@@ -10,8 +10,9 @@
   falls below ``T_l``, ``c_min`` is too low for both rates; the seed is then raised to ``T_l``
   and ``feasible`` is False.
 - psi1: sectors are the circular runs of ``M > T_l`` that hold an ``M > T_u`` seed.
-- psi2: along a sector's centre line, ``d2_bar(r)`` sums d^2 over the window of a
-  person's width across the line; its background is chi-square with 2 x window.
+- psi2 (:mod:`omnijax.detection._blobs`): at a line, ``d2_bar(r)`` sums d^2 over the window of a
+  person's width across the line (``window_n`` samples); its background is chi-square with 2 x
+  ``window_n`` degrees of freedom, whose ``1 - x_f`` quantile is the profile's significance threshold.
 """
 
 from __future__ import annotations
@@ -20,25 +21,26 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray, Shaped, UInt8
+from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray, Shaped
 from scipy.optimize import brentq
 from scipy.stats import chi2, ncx2
 
-from ..camera import OmniCamera
 from ..config import Rig
 from ..geometry import person_image_extent
-from ._change import MEASURES
 from ._polar import PolarIndex, body_radius
 
 
 class Thresholds(eqx.Module):
-    """Per-line lower and upper thresholds of ``M(theta)``, per-radius psi2 thresholds."""
+    """Per-line lower and upper thresholds of ``M(theta)``, per-radius psi2 thresholds, and the
+    smallest contrast the rates are promised for (``c_min``: a person's contrast must reach
+    :data:`~omnijax.detection._blobs.CONTRAST_FACTOR` times it)."""
 
     lower: Float[Array, " T"]
     upper: Float[Array, " T"]
     window: Float[Array, " R"]
     feasible: Bool[Array, ""]
     seed_false_alarm: Float[Array, ""]
+    c_min: Float[Array, ""]
 
 
 def chi2_variate(key, dof, shape=()) -> Array:
@@ -101,10 +103,11 @@ def build_thresholds(rig: Rig, polar: PolarIndex, key: PRNGKeyArray, dof_per_sam
     upper[seen] = np.array([upper_threshold(d, k_line * f, c_min, x_m) for d, f in zip(distinct, frac)])[inverse]
     feasible = bool(np.all(upper[seen] >= lower[seen]))
     upper = np.maximum(upper, lower)
-    window = chi2.ppf(1 - x_f, dof_per_sample * np.asarray(polar.window_px))
+    window = chi2.ppf(1 - x_f, dof_per_sample * np.asarray(polar.window_n))
     seed_fa = float(np.sum(chi2.sf(upper[seen], dof[seen])))
     return Thresholds(lower=jnp.asarray(lower), upper=jnp.asarray(upper), window=jnp.asarray(window),
-                      feasible=jnp.asarray(feasible), seed_false_alarm=jnp.asarray(seed_fa))
+                      feasible=jnp.asarray(feasible), seed_false_alarm=jnp.asarray(seed_fa),
+                      c_min=jnp.asarray(c_min))
 
 
 class Sectors(eqx.Module):
@@ -147,24 +150,3 @@ def gather_rgb(image: Shaped[Array, "H W 3"], flat: Int[Array, "*b"]) -> Shaped[
     gather of 3-element rows is several times slower)."""
     data, idx = image.reshape(-1), 3 * flat
     return jnp.stack([data[idx], data[idx + 1], data[idx + 2]], -1)
-
-
-def window_profile(frame: UInt8[Array, "H W 3"], bg_mean: Float[Array, "H W 3"], bg_var: Float[Array, "H W"],
-                   sigma: Float[Array, "H W"], omni: OmniCamera, polar: PolarIndex, theta,
-                   measure: str = "chromaticity") -> tuple[Array, Array]:
-    """psi2 along the line at ``theta``: ``(d2_bar(r), pixels(r))`` summed across the window.
-
-    The window's sensor offsets are rotated onto the line (one sine and cosine per
-    line), mapped to pixels with the camera's affinity, and sampled nearest-neighbour.
-    """
-    s, c = jnp.sin(theta), jnp.cos(theta)
-    a, b = polar.window_ab[..., 0], polar.window_ab[..., 1]
-    x, y = omni.sensor_to_pixel(s * a + c * b, c * a - s * b)
-    W, H = polar.image_size
-    xi, yi = jnp.round(x).astype(jnp.int32), jnp.round(y).astype(jnp.int32)
-    ok = polar.window_ok & (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
-    flat = jnp.where(ok, yi * W + xi, 0)
-    ok = ok & ~polar.ignore.reshape(-1)[flat]  # ignore zones (omnijax.config)
-    cur = frame.reshape(-1, 3)[flat].astype(jnp.float32)
-    d2 = MEASURES[measure][0](cur, bg_mean.reshape(-1, 3)[flat], bg_var.reshape(-1)[flat], sigma.reshape(-1)[flat])
-    return jnp.where(ok, d2, 0.0).sum(-1), ok.sum(-1).astype(jnp.float32)

@@ -7,13 +7,15 @@ Built once per rig (NumPy-free, but not traced: sizes come out of the geometry):
   pixel of the line (they are left out, so that the samples of a line stay
   independent and ``M(theta)`` is chi-square with ``samples(theta)`` times the
   measure's degrees of freedom per sample);
-- psi2 windows: at each radius, the pixels across the line over the width of a
-  person there, as sensor offsets to rotate onto any sector's centre line;
+- psi2 windows: at each radius, how many lines either side of a line span the width of a
+  person there (``window_lines``; the window sums the polar samples of those lines,
+  :func:`omnijax.detection.window_sums`), and the samples in it (``window_n``);
 - foot hypotheses: for each inner end ``i`` of a person along a line, the index just
-  past its outer end, and the image radius of its axis foot (what eq 1 turns into R_p);
+  past its outer end, the image radius of its axis foot (what eq 1 turns into R_p), that
+  floor radius R_p (m) and the person's azimuth span there;
 - the rig's *ignore* zones (``[[zones]]``, :mod:`omnijax.config`): line samples inside them are
   left out like repeats (``line_ok``), so that nothing is detected there and a line's
-  chi-square counts only the samples left; psi2 windows leave out their pixels (``ignore``).
+  chi-square counts only the samples left.
 """
 
 from __future__ import annotations
@@ -41,15 +43,14 @@ class PolarIndex(eqx.Module):
     line_index: Int[Array, "T R"]
     line_ok: Bool[Array, "T R"]
     samples: Float[Array, " T"]
-    window_ab: Float[Array, "R W 2"]
-    window_ok: Bool[Array, "R W"]
-    window_px: Float[Array, " R"]
+    window_lines: Int[Array, " R"]
+    window_n: Float[Array, " R"]
     hyp_out: Int[Array, " R"]
     hyp_ok: Bool[Array, " R"]
     hyp_r_f: Float[Array, " R"]
+    hyp_R: Float[Array, " R"]
     hyp_dout_dH: Float[Array, " R"]
     hyp_width: Float[Array, " R"]
-    ignore: Bool[Array, "height width"]
     image_size: tuple[int, int] = eqx.field(static=True)
 
     @property
@@ -114,7 +115,7 @@ def _geometry_tables(rig: Rig, radii, theta):
     r_out, dout_dH = jax.jvp(outer, (rig.person.H_p,), (jnp.ones_like(rig.person.H_p),))
     r_f = point_image_radius(R_axis, 0.0, omni.r_m, omni.H_o, omni.profile)
     width = 2 * jnp.arcsin(jnp.minimum(rho / R_axis, 1.0))  # a vertical cylinder's azimuth span
-    return x, y, R_floor, r_out, r_f, dout_dH, width
+    return x, y, R_floor, r_out, r_f, dout_dH, width, R_axis
 
 
 def build_polar_index(rig: Rig) -> PolarIndex:
@@ -127,7 +128,7 @@ def build_polar_index(rig: Rig) -> PolarIndex:
     theta = 2 * np.pi * np.arange(det.n_theta) / det.n_theta
 
     tables = _geometry_tables(rig, jnp.asarray(radii), jnp.asarray(theta))
-    x, y, R_floor, r_out, hyp_r_f, dout_dH, hyp_width = (np.asarray(v) for v in tables)
+    x, y, R_floor, r_out, hyp_r_f, dout_dH, hyp_width, hyp_R = (np.asarray(v) for v in tables)
     xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
     inside = (xi >= 0) & (xi < W_img) & (yi >= 0) & (yi < H_img)
     flat = np.where(inside, yi * W_img + xi, 0)
@@ -136,13 +137,11 @@ def build_polar_index(rig: Rig) -> PolarIndex:
     ignore = zone_mask(rig.zones, "ignore", (W_img, H_img))
     line_ok = inside & ~repeat & ~ignore.reshape(-1)[flat]
 
+    # the paper's psi2 window: a person's width (px) at each radius, as lines either side
     rho = float(body_radius(rig))
-    width = np.maximum(3, 2 * np.floor(radii * np.arctan(rho / (R_floor + rho)))) + 1  # odd, >= 3
-    w_max = int(width.max())
-    j = np.arange(w_max) - (w_max - 1) / 2
-    delta = j[None, :] / radii[:, None]
-    window_ab = np.stack([radii[:, None] * np.cos(delta), radii[:, None] * np.sin(delta)], -1)
-    window_ok = np.abs(j)[None, :] <= (width[:, None] - 1) / 2
+    half_px = np.maximum(1.0, np.floor(radii * np.arctan(rho / (R_floor + rho))))
+    window_lines = np.maximum(1, np.round(half_px / (2 * np.pi * radii / det.n_theta))).astype(np.int64)
+    window_lines = np.minimum(window_lines, det.n_theta // 2 - 1)
 
     hyp_out = np.ceil(r_out - r_min).astype(np.int64)
     hyp_ok = (hyp_out <= n_r) & (hyp_out > np.arange(n_r))
@@ -150,9 +149,8 @@ def build_polar_index(rig: Rig) -> PolarIndex:
         theta=jnp.asarray(theta), radii=jnp.asarray(radii),
         line_index=jnp.asarray(flat, dtype=jnp.int32), line_ok=jnp.asarray(line_ok),
         samples=jnp.asarray(line_ok.sum(1), dtype=float),
-        window_ab=jnp.asarray(window_ab, dtype=jnp.float32), window_ok=jnp.asarray(window_ok),
-        window_px=jnp.asarray(width),
+        window_lines=jnp.asarray(window_lines, dtype=jnp.int32), window_n=jnp.asarray(2.0 * window_lines + 1),
         hyp_out=jnp.asarray(np.minimum(hyp_out, n_r), dtype=jnp.int32), hyp_ok=jnp.asarray(hyp_ok),
-        hyp_r_f=jnp.asarray(hyp_r_f), hyp_dout_dH=jnp.asarray(dout_dH),
-        hyp_width=jnp.asarray(hyp_width), ignore=jnp.asarray(ignore), image_size=(W_img, H_img),
+        hyp_r_f=jnp.asarray(hyp_r_f), hyp_R=jnp.asarray(hyp_R), hyp_dout_dH=jnp.asarray(dout_dH),
+        hyp_width=jnp.asarray(hyp_width), image_size=(W_img, H_img),
     )

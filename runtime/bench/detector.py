@@ -12,7 +12,7 @@ import numpy as np
 from tqdm import tqdm
 
 from omnijax import build_detector, detect, learn_background, line_background
-from omnijax.detection import find_sectors, line_change, locate_feet
+from omnijax.detection import find_sectors, line_change, locate_people
 from omnijax.world import build_world
 from runtime.bench.timing import time_calls
 from runtime.files import load_scenario
@@ -62,12 +62,12 @@ def bench_size(scenario_path: str, size: tuple[int, int], repeats: int, progress
     bg = learn_background(bg_frames)
     lines = line_background(detector, bg)
 
-    stage_lines = jax.jit(line_change)
+    stage_lines = jax.jit(lambda d, f, ln: (lambda d2: (d2, d2.sum(-1)))(line_change(d, f, ln)))
     stage_sectors = jax.jit(find_sectors)
-    stage_feet = jax.jit(locate_feet)
-    M = [stage_lines(detector, f, lines) for f in timed]
-    found = [stage_sectors(detector, m) for m in M]
-    people = float(np.mean([int(detect(detector, f, bg, lines)[0].valid.sum()) for f in timed]))
+    stage_people = jax.jit(locate_people)
+    D = [stage_lines(detector, f, lines) for f in timed]
+    found = [stage_sectors(detector, m) for _, m in D]
+    people = float(np.mean([int(detect(detector, f, lines)[0].valid.sum()) for f in timed]))
 
     def cycling(call):
         state = {"i": 0}
@@ -78,13 +78,13 @@ def bench_size(scenario_path: str, size: tuple[int, int], repeats: int, progress
         return step
 
     _COUNTER.count, _COUNTER.active = 0, True
-    detect_ms = time_calls(cycling(lambda i: detect(detector, timed[i], bg, lines)), repeats)
+    detect_ms = time_calls(cycling(lambda i: detect(detector, timed[i], lines)), repeats)
     _COUNTER.active = False
     compiles = _COUNTER.count
     stages = {
         "lines_steps_1_3": time_calls(cycling(lambda i: stage_lines(detector, timed[i], lines)), repeats),
-        "sectors_step_4": time_calls(cycling(lambda i: stage_sectors(detector, M[i])), repeats),
-        "feet_steps_5_6": time_calls(cycling(lambda i: stage_feet(detector, timed[i], bg, found[i])), repeats),
+        "sectors_step_4": time_calls(cycling(lambda i: stage_sectors(detector, D[i][1])), repeats),
+        "people_steps_5_6": time_calls(cycling(lambda i: stage_people(detector, D[i][0], found[i])), repeats),
     }
 
     mog2 = cv2.createBackgroundSubtractorMOG2()

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import sys
 
 from runtime.errors import UsageError
@@ -127,6 +128,29 @@ def enable_cache(args) -> str | None:
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
     return str(path)
+
+
+def add_background_options(parser: argparse.ArgumentParser) -> None:
+    """The one learning rule's two settings (``detect``, ``run``, ``demo``): how many frames, over how long."""
+    parser.add_argument("--background-frames", type=int, metavar="N",
+                        help="frames the background is learnt from (default: the rig's [detection] "
+                             "background_frames, 30)")
+    parser.add_argument("--background-seconds", type=float, metavar="S",
+                        help="spread over this many seconds of the source (default: the rig's [detection] "
+                             "background_seconds, 10; 0 takes consecutive frames). Spread out, people who "
+                             "stand still for less than half of it are not learnt")
+
+
+def background_settings(args, rig) -> tuple[int, float]:
+    """``(frames, seconds)`` of the learning from ``--background-frames`` / ``--background-seconds`` and
+    the rig's defaults; exit 2 on values that cannot be."""
+    n = args.background_frames if args.background_frames is not None else rig.detection.background_frames
+    seconds = args.background_seconds if args.background_seconds is not None else rig.detection.background_seconds
+    if n < 3:
+        raise UsageError(f"--background-frames: expected at least 3, got {n}")
+    if not (seconds >= 0 and math.isfinite(seconds)):
+        raise UsageError(f"--background-seconds: expected seconds >= 0, got {seconds}")
+    return n, float(seconds)
 
 
 def add_loop_options(parser: argparse.ArgumentParser) -> None:

@@ -57,7 +57,7 @@ DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "configs" / "scenarios"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from runtime.cli._options import EMULATED, PACES, add_loop_options
+    from runtime.cli._options import EMULATED, PACES, add_background_options, add_loop_options
 
     p = sub.add_parser("demo", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -65,7 +65,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", default=str(DEFAULT_SCENARIO), metavar="S",
                    help="scenario TOML, or a name in configs/scenarios (default three_people)")
     p.add_argument("--frames", type=int, default=1000, metavar="N",
-                   help="scenario frames, background learning (the first 240) included (default 1000: 40 s at 25 fps)")
+                   help="scenario frames, background learning (the first 10 s) included (default 1000: 40 s at 25 fps)")
     p.add_argument("--seed", type=int, metavar="K", help="world seed (default: the scenario's)")
     p.add_argument("--pace", choices=PACES, default="live",
                    help="live: frames arrive at the scenario's rate, late ones are dropped (default); "
@@ -75,11 +75,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "through the UDP stack; onvif: ONVIF, SOAP over HTTP on localhost)")
     p.add_argument("--inset-every", type=int, default=8, metavar="K",
                    help="re-render the foveal inset every K frames (default 8; ray casting is slow)")
-    p.add_argument("--background-step", type=int, default=8, metavar="K",
-                   help="learn the background from every K-th of the first frames (default 8: 30 frames over "
-                        "9.6 s at 25 fps, so that people pausing are not learnt)")
     p.add_argument("--screenshot", type=int, default=150, metavar="N",
                    help="save the view of the N-th processed frame as DIR/view.png (default 150)")
+    add_background_options(p)
     add_loop_options(p)
     p.set_defaults(func=run)
 
@@ -120,6 +118,7 @@ class FovealInset:
 def run(args: argparse.Namespace) -> int:
     from runtime.cli._options import (
         MAX_FRAMES,
+        background_settings,
         console_and_events,
         load_ptz_profile,
         loop_config,
@@ -129,12 +128,6 @@ def run(args: argparse.Namespace) -> int:
     from runtime.errors import UsageError, interrupted_during
 
     config = loop_config(args)
-    if args.background_step < 1:
-        raise UsageError(f"--background-step: expected a positive count, got {args.background_step}")
-    n_bg = 30 * args.background_step
-    if args.frames < n_bg + 20:
-        raise UsageError(f"--frames: expected at least {n_bg + 20} (background learning takes the first {n_bg}), "
-                         f"got {args.frames}")
     if args.frames > MAX_FRAMES:
         raise UsageError(f"--frames: expected at most {MAX_FRAMES} (the walks are simulated up front), "
                          f"got {args.frames}")
@@ -153,11 +146,17 @@ def run(args: argparse.Namespace) -> int:
     from runtime.ptz.child import EmulatorProcess
     from runtime.ptz.profile import DEFAULT_PROFILES
     from runtime.ptz.transports import EMULATED
+    from runtime.realtime.perception import learning_step
     from runtime.realtime.session import run_session
     from runtime.realtime.sources import FaultySource, SyntheticSource
     from runtime.validation.scoring import DemoScorer
 
     rig, sc = load_scenario(scenario)
+    n_bg, seconds = background_settings(args, rig)
+    n_learn = (n_bg - 1) * learning_step(sc.fps, n_bg, seconds) + 1
+    if args.frames < n_learn + 20:
+        raise UsageError(f"--frames: expected at least {n_learn + 20} (background learning takes the first "
+                         f"{n_learn}), got {args.frames}")
     with console_and_events(args, scenario_rig_path(scenario), DEFAULT_PROFILES[EMULATED[args.protocol]]) as (
             console, mqtt):
         print(f"omnijax demo: building the world '{sc.name}' ({args.frames} frames at {sc.fps:g} fps) ...",
@@ -202,7 +201,7 @@ def run(args: argparse.Namespace) -> int:
             try:
                 summary = run_session(
                     rig, source, Path(args.out), driver=driver, profile=profile, config=config,
-                    paced=args.pace == "live", background_frames=30, background_step=args.background_step,
+                    paced=args.pace == "live", background_frames=n_bg, background_seconds=seconds,
                     video=not args.no_video, record=args.record, title=f"OMNI 1  {sc.name}",
                     foveal=FovealInset(world, emulator, args.inset_every), hooks=(scorer,), control_hooks=(unplug,),
                     finish=finish, screenshot_at=args.screenshot, console=console, mqtt=mqtt)

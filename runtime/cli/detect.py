@@ -8,16 +8,23 @@ import time
 
 HELP = "detect people (feet, sectors, sigmas) in a video file or a folder of images"
 DESCRIPTION = """\
-Learns the background from the first frames (robustly: people may walk through),
-then runs the jitted detector on every later frame: chromaticity and d^2 (eq 5-7),
-radial sums and hysteresis sectors (eq 8-10), the windowed profile and the Bayes
-foot estimate (eq 11-12), adapting the background where nothing was detected.
+Learns the background from frames spread over the first seconds (--background-frames
+over --background-seconds, the rig's [detection] defaults: 30 over 10 s; robustly:
+people may walk through, or stand for less than half of it), then runs the jitted
+detector on every later frame: chromaticity and d^2 (eq 5-7), radial sums and
+hysteresis sectors (eq 8-10), the windowed profile at every line of them and the
+people it holds one at a time with the Bayes foot estimate (eq 11-12), and the
+tracker; the background keeps itself right (the background's life: ghosts of people
+who left re-learnt, what stays still outside every person absorbed after [detection]
+absorb_s, a person who stops kept, the rest drifting; docs/detection.md). This is the
+same pipeline `run` and `demo` use.
 
 Writes DIR/detections.jsonl (one line per frame: each person's r_f, theta_f, their
 sigmas under the sigma rule (the detector's own as detector_sigma_*: see the rig's
 [detection] sigma_gain_* / sigma_extra_*), contrast, sector edges, foot and head pixels), DIR/overlay_NNNNN.png every
 --overlay-every frames (sectors red, centre lines green, the person's extent yellow,
-foot cyan, head white) and DIR/summary.json.
+foot cyan, head white) and DIR/summary.json (frames, the learning: which frames and how
+much of the floor it settled, the background's life: ghost detections repaired).
 
 --change-only is for footage from ordinary (perspective) cameras, where the omni
 geometry does not apply: it writes per-pixel change masks and compares them with
@@ -26,7 +33,7 @@ OpenCV's MOG2 after both have learnt the scene (no --config needed).
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from runtime.cli._options import deprecated_alias
+    from runtime.cli._options import add_background_options, deprecated_alias
     from runtime.settings import finite_float
 
     p = sub.add_parser("detect", help=HELP, description=DESCRIPTION,
@@ -34,9 +41,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("source", metavar="SOURCE", help="video file or folder of images")
     p.add_argument("--config", metavar="FILE", help="rig TOML file (required unless --change-only)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
-    p.add_argument("--background-frames", type=int, metavar="N",
-                   help="frames to learn the background from (default: [detection] background_frames; "
-                        "--change-only: 60)")
+    add_background_options(p)
     p.add_argument("--overlay-every", type=int, default=25, metavar="K", help="overlay PNG every K frames (25)")
     deprecated_alias(p, "--limit", p.add_argument(
         "--frames", type=int, metavar="N", help="read at most N frames of SOURCE, background learning included"))
@@ -58,9 +63,9 @@ def _check_args(args) -> None:
 
     if not args.change_only and not args.config:
         raise UsageError("--config is required (or use --change-only for non-omnidirectional footage)")
-    for name in ("background_frames", "overlay_every", "frames"):
+    for name in ("overlay_every", "frames"):
         v = getattr(args, name)
-        if v is not None and v < (3 if name == "background_frames" else 1):
+        if v is not None and v < 1:
             raise UsageError(f"--{name.replace('_', '-')}: expected a positive count, got {v}")
     if not 0 < args.pixel_fa < 1:
         raise UsageError(f"--pixel-fa: expected a probability in (0, 1), got {args.pixel_fa}")
@@ -78,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _learn(frames_iter, n: int, what: str):
+    """``--change-only``: the first ``n`` frames, stacked."""
     import numpy as np
 
     from runtime.errors import UsageError
@@ -95,81 +101,53 @@ def _learn(frames_iter, n: int, what: str):
 
 def _run_detector(args) -> int:
     import cv2
-    import jax
-    import jax.numpy as jnp
     import numpy as np
     from tqdm import tqdm
 
-    from omnijax import (
-        adapt_background,
-        build_detector,
-        detect,
-        detection_sigmas,
-        learn_background,
-        line_background,
-        sector_mask,
-    )
     from omnijax.detection import polar_range
+    from runtime.cli._options import background_settings
     from runtime.errors import UsageError
     from runtime.files import load_rig
-    from runtime.frames import SourceError, read_frames
+    from runtime.frames import SourceError, frames_fps, read_frames
     from runtime.output import dumps, staged_output
     from runtime.realtime.overlay import draw_detections, foot_and_head_pixels
+    from runtime.realtime.perception import detect_frames
 
     rig = load_rig(args.config)
-    n_bg = args.background_frames or rig.detection.background_frames
-    rate = rig.detection.adapt_rate if args.adapt_rate is None else args.adapt_rate
+    n_bg, seconds = background_settings(args, rig)
     W, H = rig.omni.image_size
     try:
         frames = read_frames(args.source, args.frames)
-        training = _learn(frames, n_bg, args.source)
-        if training.shape[1:] != (H, W, 3):
-            raise UsageError(f"{args.source}: frames are {training.shape[2]}x{training.shape[1]}, "
-                             f"expected {W}x{H} (omni.image_size of {args.config})")
+        fps = frames_fps(args.source)
         with staged_output(args.out) as stage, (stage / "detections.jsonl").open("w") as log:
             t_build = time.perf_counter()
-            detector = build_detector(rig)
-            bg = learn_background(training, floor=0.5 if args.sigma_floor is None else args.sigma_floor)
-            lines = line_background(detector, bg)
-            theta_map = rig.omni.to_polar(*np.meshgrid(np.arange(W), np.arange(H)))[1]
+            run_ = detect_frames(rig, _sized(frames, (H, W), args), fps=fps, samples=n_bg, seconds=seconds,
+                                 what=str(args.source))
             build_s = time.perf_counter() - t_build
             r_range = polar_range(rig)
-            counts, t_detect, n = [], 0.0, 0
-            for frame in tqdm(frames, desc="detect", unit="frame", initial=n_bg, disable=None, leave=False):
-                index = n_bg + n
-                x = jnp.asarray(frame)
-                t0 = time.perf_counter()
-                dets, _ = detect(detector, x, bg, lines)
-                jax.block_until_ready(dets)
-                t_detect += time.perf_counter() - t0
-                valid = np.asarray(dets.valid)
-                s_r, s_t = (np.asarray(a) for a in detection_sigmas(rig, dets.sigma_r_f, dets.sigma_theta_f))
-                people = []
-                for k in np.nonzero(valid)[0]:
-                    r_f, th = float(dets.r_f[k]), float(dets.theta_f[k])
-                    foot, head = foot_and_head_pixels(rig, r_f, th)
-                    people.append({
-                        "r_f": r_f, "theta_f": th, "sigma_r_f": float(s_r[k]), "sigma_theta_f": float(s_t[k]),
-                        "detector_sigma_r_f": float(dets.sigma_r_f[k]),
-                        "detector_sigma_theta_f": float(dets.sigma_theta_f[k]), "contrast": float(dets.contrast[k]),
-                        "theta_l": float(dets.theta_l[k]), "theta_r": float(dets.theta_r[k]),
-                        "r_in": float(dets.r_in[k]), "r_out": float(dets.r_out[k]),
-                        "foot_px": list(foot), "head_px": list(head),
-                    })
-                log.write(json.dumps({"frame": index, "people": people}) + "\n")
-                counts.append(len(people))
+            counts, n, t0 = [], 0, time.perf_counter()
+            bar = tqdm(run_, desc="detect", unit="frame", initial=run_.read, disable=None, leave=False)
+            for item in bar:
+                for person in item.people:
+                    foot, head = foot_and_head_pixels(rig, person["r_f"], person["theta_f"])
+                    person["foot_px"], person["head_px"] = list(foot), list(head)
+                log.write(json.dumps({"frame": item.index, "people": item.people}) + "\n")
+                counts.append(len(item.people))
                 if n % args.overlay_every == 0:
-                    img = draw_detections(frame, rig, dets, r_range, f"frame {index}: {len(people)} people")
-                    cv2.imwrite(str(stage / f"overlay_{index:05d}.png"), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
-                bg = adapt_background(bg, x, ~sector_mask(theta_map, dets), rate)
-                lines = line_background(detector, bg)
+                    img = draw_detections(item.image, rig, item.dets, r_range,
+                                          f"frame {item.index}: {len(item.people)} people")
+                    cv2.imwrite(str(stage / f"overlay_{item.index:05d}.png"), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
                 n += 1
-            th = detector.thresholds
+            th = run_.perception.detector.thresholds
+            keeper = run_.perception.keeper
             summary = {
                 "source": str(args.source), "config": str(args.config), "frames": n,
-                "background_frames": n_bg, "sensor_sigma_median": float(jnp.median(bg.sigma)),
+                "background_frames": n_bg, "learning": {"frames": n_bg, "seconds": seconds, "step": run_.step_frames,
+                                                        "frame_indices": run_.learning_frames},
+                "learning_frames": run_.learning_frames, "background": keeper.summary(),
+                "sensor_sigma_median": float(np.median(np.asarray(keeper.lines.sigma))),
                 "people_per_frame": float(np.mean(counts)) if counts else 0.0,
-                "detect_ms_mean": 1e3 * t_detect / max(n, 1), "build_s": build_s,
+                "frame_ms_mean": 1e3 * (time.perf_counter() - t0) / max(n, 1), "build_s": build_s,
                 "thresholds": {"feasible": bool(th.feasible), "seed_false_alarm_per_frame": float(th.seed_false_alarm),
                                "lower_mean": float(th.lower.mean()), "upper_mean": float(th.upper.mean())},
             }
@@ -177,8 +155,21 @@ def _run_detector(args) -> int:
     except SourceError as exc:
         raise UsageError(str(exc)) from None
     print(f"{n} frames, {summary['people_per_frame']:.2f} people per frame, "
-          f"{summary['detect_ms_mean']:.2f} ms per frame (mean, with I/O jitter); wrote {args.out}")
+          f"{summary['frame_ms_mean']:.2f} ms per frame (mean: detection, tracking and the background's life, "
+          f"with I/O); background sure of {summary['background']['learned_share_end']:.2f} of the floor; "
+          f"wrote {args.out}")
     return 0
+
+
+def _sized(frames, shape, args):
+    """``frames``, refusing the first of another size than the rig's (exit 2, naming both)."""
+    from runtime.errors import UsageError
+
+    for f in frames:
+        if f is not None and f.shape[:2] != shape:
+            raise UsageError(f"{args.source}: frames are {f.shape[1]}x{f.shape[0]}, expected {shape[1]}x{shape[0]} "
+                             f"(omni.image_size of {args.config})")
+        yield f
 
 
 def _run_change_only(args) -> int:
@@ -195,6 +186,8 @@ def _run_change_only(args) -> int:
     from runtime.output import dumps, staged_output
 
     n_bg = args.background_frames or 60
+    if n_bg < 3:
+        raise UsageError(f"--background-frames: expected at least 3, got {n_bg}")
     rate = 0.02 if args.adapt_rate is None else args.adapt_rate
     threshold = float(chi2.ppf(1 - args.pixel_fa, 2))
     step = jax.jit(lambda f, bg: change_image(f, bg) > threshold)

@@ -17,7 +17,11 @@ doubling to 2 s, for up to 60 s, and the reconnects are counted in summary.json
 stream {reconnects, drops, failed_opens, outage_s}), a video file or a folder of
 images. A capture thread keeps only the newest frame (late frames are dropped and
 counted). The
-background is learnt from the first frames; then, per frame: detection (jitted),
+background is learnt from frames spread over the first seconds (--background-frames over
+--background-seconds: people standing through less than half of them are not learnt) and
+keeps itself right while running (ghosts of people who left are re-learnt, what stays
+still outside every person is absorbed after [detection] absorb_s, a person who stops
+stays); then, per frame: detection (jitted),
 tracking (Kalman with optimal assignment, or the paper's nearest neighbour), the
 target (round-robin with a dwell time, people whose face was not yet captured
 first; or a single person), the head predicted to when the PTZ will get there,
@@ -43,7 +47,7 @@ with that token change anything. --mqtt URL publishes the events to a broker.
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from runtime.cli._options import PACES, add_loop_options, add_ptz_profile_option
+    from runtime.cli._options import PACES, add_background_options, add_loop_options, add_ptz_profile_option
     from runtime.settings import finite_float
 
     p = sub.add_parser("run", help=HELP, description=DESCRIPTION,
@@ -63,27 +67,25 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ptz-video", metavar="SOURCE",
                    help="the PTZ camera's own video (stream URL, camera index or file): shown in the operator's view "
                         "and the console, and saved as the face when one is captured (default: none)")
-    p.add_argument("--background-frames", type=int, metavar="N",
-                   help="frames to learn the background from (default: [detection] background_frames)")
-    p.add_argument("--background-step", type=int, default=1, metavar="K",
-                   help="learn from every K-th frame (default 1); spacing them out keeps people who pause "
-                        "out of the background")
+    add_background_options(p)
     add_loop_options(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from runtime.cli._options import console_and_events, load_ptz_profile, loop_config, parse_faults
+    from runtime.cli._options import (
+        background_settings,
+        console_and_events,
+        load_ptz_profile,
+        loop_config,
+        parse_faults,
+    )
     from runtime.errors import UsageError
 
     config = loop_config(args)
     plan = parse_faults(args.faults, ptz_unplug=False)
     if args.fps is not None and not args.fps > 0:
         raise UsageError(f"--fps: expected frames per second > 0, got {args.fps}")
-    if args.background_frames is not None and args.background_frames < 3:
-        raise UsageError(f"--background-frames: expected at least 3, got {args.background_frames}")
-    if args.background_step < 1:
-        raise UsageError(f"--background-step: expected a positive count, got {args.background_step}")
 
     from runtime.files import load_rig
     from runtime.frames import FolderSource, SourceError, open_source
@@ -92,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
     from runtime.realtime.sources import FaultySource
 
     rig = load_rig(args.config)
+    args.background_frames, args.background_seconds = background_settings(args, rig)
     profile = load_ptz_profile(args.ptz_profile, required_protocol(args.ptz) if args.ptz else None)
     with console_and_events(args, Path(args.config), args.ptz_profile or DEFAULT_PROFILES[profile.protocol]) as (
             console, mqtt):
@@ -143,7 +146,8 @@ def _run(args, rig, source, profile, config, plan, pace, console, mqtt) -> dict:
         with ptz_view as foveal:
             return run_session(rig, source, Path(args.out), driver=driver, profile=profile, config=config,
                                paced=pace == "live", background_frames=args.background_frames,
-                               background_step=args.background_step, video=not args.no_video, record=args.record,
+                               background_seconds=args.background_seconds, video=not args.no_video,
+                               record=args.record,
                                title=f"OMNI  {Path(str(args.source)).name}", foveal=foveal,
                                extra={"config_file": str(args.config),
                                       "ptz_url": redact(args.ptz) if args.ptz else None, "pace": pace,

@@ -34,10 +34,12 @@ from runtime.realtime import kalman
 
 
 @jax.jit
-def perceive(detector: Detector, rig: Rig, frame, bg, lines):
-    """Detection (steps 1-6) and the detections' floor positions with covariances (the aim
-    pipeline's :func:`~omnijax.aiming.floor_from_detections`, under its sigma rule)."""
-    dets, trace = detect(detector, frame, bg, lines)
+def perceive(detector: Detector, rig: Rig, frame, lines):
+    """Detection (steps 1-6) against the background's polar samples ``lines`` and the detections'
+    floor positions with covariances (the aim pipeline's :func:`~omnijax.aiming.floor_from_detections`,
+    under its sigma rule). Returns the detections, their trace (the frame's d^2 for the background's
+    life), the floor points and covariances."""
+    dets, trace = detect(detector, frame, lines)
     z, R = floor_from_detections(rig, dets.r_f, dets.theta_f, dets.sigma_r_f, dets.sigma_theta_f)
     return dets, trace, z, R
 
@@ -64,13 +66,15 @@ class Slew(eqx.Module):
 
 
 class Control(eqx.Module):
-    """One frame's result. Tracker: ``assign`` (N,) each slot's detection (-1: none), ``x`` (N, 4),
-    ``P`` (N, 4, 4) after the step. Aims: ``aim_slot`` (A,) the slots of the confirmed tracks
-    (``aim_ok`` (A,) which entries are real), ``aims`` their :class:`~omnijax.aiming.Aim` (batched),
-    ``lead`` (A,) the prediction horizon (s) and ``floor_sd`` (A, 2) the sd of the predicted floor
-    position (m)."""
+    """One frame's result. ``dets`` and ``d2`` (the frame's change at the polar samples, for the
+    background's life); ``z``, ``R`` the detections' floor points and covariances. Tracker:
+    ``assign`` (N,) each slot's detection (-1: none), ``x`` (N, 4), ``P`` (N, 4, 4) after the step.
+    Aims: ``aim_slot`` (A,) the slots of the confirmed tracks (``aim_ok`` (A,) which entries are
+    real), ``aims`` their :class:`~omnijax.aiming.Aim` (batched), ``lead`` (A,) the prediction horizon
+    (s) and ``floor_sd`` (A, 2) the sd of the predicted floor position (m)."""
 
     dets: object
+    d2: jax.Array
     z: jax.Array
     R: jax.Array
     assign: jax.Array
@@ -84,13 +88,13 @@ class Control(eqx.Module):
 
 
 @functools.partial(jax.jit, static_argnames=("mode", "confirm"))
-def control_step(detector: Detector, rig: Rig, frame, bg, lines, slots, t, accel_sd, nearest_gate_m,
+def control_step(detector: Detector, rig: Rig, frame, lines, slots, t, accel_sd, nearest_gate_m,
                  slew: Slew, mode: str = "kalman", confirm: int = 2) -> Control:
     """Frame -> detections -> tracks -> pan/tilt/zoom of every confirmed track, in one compiled call
     (see the module docstring). ``slots``: the tracker's (x, P, t, live, hits) slot arrays
     (:meth:`~runtime.realtime.tracker.Tracker.slots`); ``t``: the frame's time (s); ``mode``,
     ``accel_sd``, ``nearest_gate_m``, ``confirm``: the tracker's settings."""
-    dets, _, z, R = perceive(detector, rig, frame, bg, lines)
+    dets, trace, z, R = perceive(detector, rig, frame, lines)
     x, P, t_tracks, live, hits = slots
     assign, x_new, P_new = kalman.step(mode, accel_sd, nearest_gate_m, x, P, t_tracks, live, t, z, R, dets.valid)
     confirmed = (assign >= 0) & (hits + 1 >= confirm)
@@ -106,5 +110,5 @@ def control_step(detector: Detector, rig: Rig, frame, bg, lines, slots, t, accel
         return aim_at_floor(rig, xp[:2], Pp[:2, :2], ZOOM_RULES), lead, jnp.sqrt(jnp.diagonal(Pp)[:2])
 
     aims, lead, floor_sd = jax.vmap(one)(x_new[aim_slot], P_new[aim_slot])
-    return Control(dets=dets, z=z, R=R, assign=assign, x=x_new, P=P_new, aim_slot=aim_slot, aim_ok=aim_ok,
-                   aims=aims, lead=lead, floor_sd=floor_sd)
+    return Control(dets=dets, d2=trace.d2, z=z, R=R, assign=assign, x=x_new, P=P_new, aim_slot=aim_slot,
+                   aim_ok=aim_ok, aims=aims, lead=lead, floor_sd=floor_sd)

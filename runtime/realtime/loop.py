@@ -13,7 +13,9 @@ The control thread does only this, per frame (each stage timed):
    tracks the PTZ can frame at ``p_contain``: else the loop holds and counts why, ``held_untrusted``
    or ``held_unframeable``) and its aim taken from the call's result, the dead-zone test;
 5. ``send``: the PTZ command through the driver, unless it falls in the dead-zone;
-6. ``adapt``: the background update dispatched (it runs while the loop waits for the next frame).
+6. ``adapt``: the background's life dispatched (:class:`~runtime.realtime.perception.BackgroundKeeper`:
+   ghost repair, absorption, drift, fed by the tracker's trusted people; it runs while the loop waits
+   for the next frame).
 
 The operator's requests (the console: a chosen target, a pause, a manual pointing, new zones) are read
 once a frame from :class:`~runtime.realtime.operator.Operator` without waiting (``operator``).
@@ -45,12 +47,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from omnijax import INPUT_NAMES, Aim, Detector, Rig, adapt_background, line_background, sector_mask
+from omnijax import INPUT_NAMES, Aim, Detector, Rig
 from omnijax.zoom import ZOOM_RULES
 from runtime.realtime.config import LoopConfig
 from runtime.realtime.control import Slew, control_step, pan_tilt_slew_s, perceive
 from runtime.realtime.drawing import OffPath
 from runtime.realtime.operator import Operator, OperatorState
+from runtime.realtime.perception import BackgroundKeeper
 from runtime.realtime.sources import Capture, Frame
 from runtime.realtime.targeting import TargetSelector, can_frame, outside_dead_zone, trust_rule
 from runtime.realtime.tracker import Tracker
@@ -59,14 +62,7 @@ from runtime.realtime.zones import priority_test
 #: Timed stages: the control thread's, then the drawing thread's (``draw``: the hooks; ``log``).
 STAGES = ("capture", "control", "track", "aim", "send", "adapt", "draw", "log")
 _slew_s = jax.jit(pan_tilt_slew_s)
-__all__ = ["STAGES", "Command", "RealTimeLoop", "Samples", "Timings", "perceive", "update_background"]
-
-
-@jax.jit
-def update_background(detector: Detector, bg, frame, theta_map, dets, rate):
-    """The background adapted where no person's sector is (``rate`` per call), and its polar lines."""
-    bg = adapt_background(bg, frame, ~sector_mask(theta_map, dets), rate)
-    return bg, line_background(detector, bg)
+__all__ = ["STAGES", "Command", "RealTimeLoop", "Samples", "Timings", "perceive"]
 
 
 @dataclass
@@ -144,19 +140,23 @@ class RealTimeLoop:
 
     def __init__(self, rig: Rig, detector: Detector, background, capture: Capture, driver, profile,
                  config: LoopConfig, log_path: Path, on_frame: Callable | None = None,
-                 on_control: Callable | None = None, operator: Operator | None = None):
+                 on_control: Callable | None = None, operator: Operator | None = None,
+                 learning_frames: int | None = None):
         self.rig, self.detector, self.capture = rig, detector, capture
         self.operator = operator
         self.zones, self.zones_version = rig.zones, 0
         self.driver, self.profile, self.cfg = driver, profile, config
-        self.bg = background
-        self.lines = line_background(detector, background)
         self.tracker = Tracker(config.tracker)
         if self.tracker.confirm < 2:
             raise ValueError("the fused control step aims at tracks matched again this frame: confirm must be >= 2")
         #: tracker slots in the compiled step; beyond them the tracks missing longest are dropped (counted)
         self.n_slots = 4 * detector.max_people
         self.selector = TargetSelector(config.target, config.dwell_s, trust_rule(config))
+        #: how the background was learnt (frames, seconds, step, frame indices), for the summary
+        self.learning: dict | None = None
+        #: the background's life, stepped every ``adapt_every``-th frame after the send
+        self.keeper = BackgroundKeeper(rig, detector, background, trust_rule(config), capture.source.fps,
+                                       learning_frames or rig.detection.background_frames, config.adapt_every)
         self.selector.priority = priority_test(rig)
         self.timings = Timings()
         self.on_frame, self.on_control = on_frame, on_control
@@ -178,7 +178,6 @@ class RealTimeLoop:
         self._framable: set[int] = set()
         W, H = rig.omni.image_size
         self.shape = (H, W, 3)
-        self._theta_map = jnp.asarray(rig.omni.to_polar(*np.meshgrid(np.arange(W), np.arange(H)))[1], jnp.float32)
         self.period = 1.0 / capture.source.fps if capture.source.fps else None
         if profile is not None:
             self._rates = (float(profile.pan.slew_deg_s()), float(profile.tilt.slew_deg_s()))
@@ -210,7 +209,7 @@ class RealTimeLoop:
                     pan_deg_s=jnp.asarray(self._rates[0]), tilt_deg_s=jnp.asarray(self._rates[1]),
                     latency_s=jnp.asarray(self.profile.link.command_latency_s if self.profile is not None else 0.0))
         tr = self.tracker
-        return control_step(self.detector, self.rig, image, self.bg, self.lines, tr.slots(self.n_slots),
+        return control_step(self.detector, self.rig, image, self.keeper.lines, tr.slots(self.n_slots),
                             jnp.asarray(t, float), tr.accel_sd, tr.nearest_gate_m, slew, mode=tr.mode,
                             confirm=tr.confirm)
 
@@ -218,9 +217,9 @@ class RealTimeLoop:
         """Compile the jitted stages on a frame of the right size before timing anything; returns
         the (empty) detections of the blank frame."""
         blank = jnp.zeros(self.shape, jnp.uint8)
-        dets = jax.block_until_ready(self._control(blank, 0.0)).dets
-        jax.block_until_ready(update_background(self.detector, self.bg, blank, self._theta_map, dets,
-                                                self.rig.detection.adapt_rate * self.cfg.adapt_every))
+        out = jax.block_until_ready(self._control(blank, 0.0))
+        dets = out.dets
+        self.keeper.warm_up(blank, dets, out.d2)
         _slew_s(0.0, 0.0, 0.0, 0.0, *self._rates).block_until_ready()
         return dets
 
@@ -285,6 +284,7 @@ class RealTimeLoop:
             swap = self.operator.take_zones()
             if swap is not None:  # rebuilt off this thread; same shapes, nothing recompiles
                 self.detector, self.selector.priority = swap.detector, swap.priority
+                self.keeper.detector = swap.detector
                 self.zones, self.zones_version = swap.zones, swap.version
             op = self.operator.state
         tracker = self.tracker
@@ -330,8 +330,9 @@ class RealTimeLoop:
         if command is None and self.selector.held is not None:
             record["held"] = self.selector.held
         if self.counts["frames"] % self.cfg.adapt_every == 0:  # dispatched, not waited for
-            self.bg, self.lines = update_background(self.detector, self.bg, x, self._theta_map, out.dets,
-                                                    self.rig.detection.adapt_rate * self.cfg.adapt_every)
+            where = np.nonzero(valid)[0]
+            slot_of = {tr.id: int(where[tr.detection]) for tr in tracker.tracks if tr.detection is not None}
+            self.keeper.update(x, out.dets, out.d2, self.keeper.trusted(tracker.tracks, slot_of, valid.shape[0]))
         self._record("adapt", t)
         self.off_path.submit({"record": record, "frame": frame, "dets": c.dets, "z": z,
                               "tracks": [copy.copy(tr) for tr in confirmed], "command": command,
@@ -516,6 +517,7 @@ class RealTimeLoop:
                        "source_ended": self.stop_reason == "source ended"},
             "off_path": self.off_path.summary() if self.off_path is not None else None,
             "counts": self.counts,
+            "background": self.keeper.summary(),
             "captures": self.selector.captures,
             "config": {"zoom_rule": self.cfg.zoom_rule, "tracker": self.cfg.tracker, "target": self.cfg.target,
                        "dwell_s": self.cfg.dwell_s, "dead_zone_sd": self.cfg.dead_zone_sd,

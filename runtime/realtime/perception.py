@@ -1,20 +1,18 @@
-"""Perception with a background that lives: one learning rule, the detector, the tracker, and the
-decisions of the background's life. What ``omnijax detect``, ``run``, ``demo`` and the perception
-sweep (benchmarks/perception_sweep.py) share.
+"""Perception with a background that lives: one learning rule, the detector, the tracker and the
+background's life, as ``omnijax detect``, ``run``, ``demo`` and the perception sweep
+(benchmarks/perception_sweep.py) all use them.
 
 - **Learning** (:func:`learning_step`, :func:`learn_from_frames`): ``[detection] background_frames``
   frames spread over ``background_seconds`` (every ``step``-th frame), robustly averaged around their
-  temporal median (:func:`omnijax.learn_background`): a person standing for less than half of the
-  window is not learnt. The frames after the window are processed.
-- **The background's life** (:class:`BackgroundKeeper`): every processed frame the kernel
-  :func:`omnijax.detection.live_step` measures each detection's ghost evidence (an object's edge in
-  the current image at the sector's sides, or none) and re-learns the detections this keeper marks:
-  a detection whose track has stood still (:data:`STATIC_M` over :data:`STATIC_S`) and shown no
-  object edge for ``ghost_s`` is a ghost (someone the background holds who has gone, an object moved
-  away, a lamp of another colour) and is re-learnt; an object that stands still with no trusted track
-  (a moved chair; :func:`runtime.realtime.targeting.is_trusted`) is absorbed after ``absorb_s``. A
-  person who stops keeps an object's edge and is never re-learnt; a person trusted (walked in) is
-  never absorbed.
+  median colour (:func:`omnijax.learn_background`): a person standing through less than half of
+  the window is not learnt, and what the window could not settle is learnt later, as it is seen
+  free (:mod:`omnijax.detection._life`). The frames after the window are processed.
+- **The background's life** (:class:`BackgroundKeeper`): after each frame's detection, the kernel
+  :func:`omnijax.detection.live_step` repairs ghosts (detections with no object edge in the current
+  image), absorbs what stays changed and still for ``absorb_s`` outside every trusted person, lets
+  the rest drift. The tracker feeds it: a detection whose track is trusted (a person who walked in,
+  :func:`runtime.realtime.targeting.is_trusted`) is a ghost only on both signs of one (no edge now,
+  an edge in the background), and its region is never absorbed, so a person who stops stays.
 - :class:`Perception` and :func:`detect_frames`: learning, then per frame the detector, the floor
   positions, the tracker and the keeper: ``omnijax detect``'s pipeline. The real-time loop runs the
   same detector and tracker inside its fused control call and the same keeper after it.
@@ -22,25 +20,20 @@ sweep (benchmarks/perception_sweep.py) share.
 
 from __future__ import annotations
 
-import math
-from collections import deque
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from omnijax import Rig, build_detector, detection_sigmas, learn_background, line_background
-from omnijax.detection import BackgroundLife, learned_share, live_step, pixel_polar, start_life
+from omnijax.detection import LifeRates, learned_share, live_step, start_life
 from runtime.errors import UsageError
 from runtime.realtime.control import perceive
 from runtime.realtime.targeting import TrustRule, is_trusted
 from runtime.realtime.tracker import Track, Tracker
 
-#: A track stands still when its filtered position stayed within STATIC_M (m) of where it is now over
-#: the last STATIC_S (s).
-STATIC_M, STATIC_S = 0.2, 0.3
 #: Frames per second assumed for a source that does not say (an image folder).
 DEFAULT_FPS = 25.0
 
@@ -71,117 +64,99 @@ def learn_from_frames(frames_iter: Iterable, n: int, step: int, what: str):
     return learn_background(np.stack(got)), used, read
 
 
+def life_rates(rig: Rig, fps: float | None, learning_frames: int, every: int = 1) -> LifeRates:
+    """The rig's ``[detection]`` time constants as frames of a source at ``fps`` whose life is stepped
+    every ``every``-th frame."""
+    d = rig.detection
+    per_s = (fps or DEFAULT_FPS) / every
+    f = lambda s: jnp.asarray(max(1.0, s * per_s))
+    return LifeRates(adapt_rate=jnp.asarray(float(d.adapt_rate) * every), edge=jnp.asarray(float(d.ghost_edge)),
+                     still_frames=f(d.still_s), ghost_frames=f(d.ghost_s), absorb_frames=f(d.absorb_s),
+                     learn_frames=jnp.asarray(float(learning_frames)))
+
+
 @dataclass
 class LifeCounts:
-    """What the keeper did: detections re-learnt as ghosts, objects absorbed, frames decided."""
+    """What the keeper did: frames stepped, detections judged ghosts (summed over frames), the trusted
+    ones among them."""
 
-    ghosts: int = 0
-    absorbed: int = 0
     frames: int = 0
-    ghost_times: list = field(default_factory=list)  # (t, x, y) of each ghost repair
+    ghost_detections: int = 0
+    trusted_ghosts: int = 0
 
     def as_dict(self) -> dict:
-        return {"ghost_repairs": self.ghosts, "absorbed": self.absorbed, "frames": self.frames}
+        return {"frames": self.frames, "ghost_detections": self.ghost_detections,
+                "trusted_ghosts": self.trusted_ghosts}
 
 
 class BackgroundKeeper:
-    """The background's life on the host: holds the :class:`~omnijax.detection.BackgroundLife` and its
-    polar lines, decides which detections are re-learnt (see the module docstring) and dispatches
-    :func:`~omnijax.detection.live_step`. ``update`` is called once per processed frame, after the
-    tracker's bookkeeping; its kernel runs while the caller waits for the next frame."""
+    """The background's life on the host: holds the :class:`~omnijax.detection.Life`, says which
+    detections are trusted people (from the tracker) and dispatches
+    :func:`~omnijax.detection.live_step`. :meth:`update` is called once per processed frame, after the
+    tracker's bookkeeping; its kernel runs while the caller waits for the next frame, and the counts
+    of a frame are read at the next update (no wait)."""
 
-    def __init__(self, rig: Rig, detector, bg, trust: TrustRule, fps: float | None, every: int = 1):
+    def __init__(self, rig: Rig, detector, bg, trust: TrustRule, fps: float | None, learning_frames: int,
+                 every: int = 1):
         self.rig, self.detector, self.trust = rig, detector, trust
-        self.life: BackgroundLife = start_life(bg)
-        self.lines = line_background(detector, bg)
-        self.pixels = pixel_polar(rig.omni)
-        d = rig.detection
-        dt = every / (fps or DEFAULT_FPS)
-        self.recent_rate = 1.0 - math.exp(-dt / d.recent_s)
-        self.adapt_rate = float(d.adapt_rate) * every
-        self.ghost_s, self.edge, self.absorb_s = d.ghost_s, d.ghost_edge, d.absorb_s
+        self.life = start_life(line_background(detector, bg))
+        self.rates = life_rates(rig, fps, learning_frames, every)
+        self.learning_frames = learning_frames
         self.counts = LifeCounts()
-        self._pending: tuple | None = None  # (evidence (K,), {slot: track id}) of the last update
-        self.learned_share = float(learned_share(detector, bg))
+        self.learned_at_start = float(learned_share(detector, self.life, learning_frames))
+        self._pending = None
 
     @property
-    def bg(self):
-        return self.life.bg
+    def lines(self):
+        return self.life.lines
 
-    def warm_up(self, blank, dets) -> None:
+    def warm_up(self, blank, dets, d2) -> None:
         """Compile the life's kernel on a blank frame before anything is timed."""
-        out = live_step(self.detector, self.life, blank, self.lines, dets, np.zeros(dets.valid.shape, bool),
-                        self.pixels, self.recent_rate, self.adapt_rate)
+        out = live_step(self.detector, self.life, blank, dets, d2, np.zeros(dets.valid.shape, bool), self.rates)
         jax.block_until_ready(out)
 
-    def update(self, image, dets, slot_of: dict[int, int], t: float, tracks: list[Track]) -> np.ndarray:
-        """Decide and dispatch one frame of the background's life. ``dets`` are the frame's detections
-        (device arrays, K slots), ``slot_of`` maps a track id to the slot of the detection it took this
-        frame, ``tracks`` all tracks after the bookkeeping. Returns the slots re-learnt."""
-        self._take_evidence(t, tracks)
-        K = dets.valid.shape[0]
-        repair = np.zeros(K, bool)
+    def trusted(self, tracks: list[Track], slot_of: dict[int, int], K: int) -> np.ndarray:
+        """Which of the ``K`` detection slots a trusted track took (``slot_of``: track id -> slot)."""
+        out = np.zeros(K, bool)
         for tr in tracks:
             k = slot_of.get(tr.id)
-            if k is None:
-                continue
-            static_for = self._static_for(tr, t)
-            ghost_for = t - tr.extra["ghost_since"] if tr.extra.get("ghost_since") is not None else -1.0
-            trusted = is_trusted(tr, self.trust)
-            if static_for >= STATIC_S and ghost_for >= self.ghost_s:
-                repair[k] = True
-                self.counts.ghosts += 1
-                self.counts.ghost_times.append((t, *map(float, tr.position)))
-                tr.extra["ghost_since"] = None
-            elif static_for >= self.absorb_s and not trusted:
-                repair[k] = True
-                self.counts.absorbed += 1
-        self.counts.frames += 1
-        self.life, lines, evidence = live_step(self.detector, self.life, image, self.lines, dets, repair,
-                                               self.pixels, self.recent_rate, self.adapt_rate)
-        self.lines = lines
-        self._pending = (evidence, {k: tid for tid, k in slot_of.items()}, t)
-        return repair
+            if k is not None and is_trusted(tr, self.trust):
+                out[k] = True
+        return out
 
-    def _take_evidence(self, t: float, tracks: list[Track]) -> None:
-        """The ghost evidence of the last update's detections, onto the tracks that took them."""
+    def update(self, image, dets, d2, trusted: np.ndarray) -> None:
+        """Dispatch one frame of the life for the frame ``image`` whose detections ``dets`` (device
+        arrays) were found with change ``d2`` against :attr:`lines`; ``trusted`` per slot."""
+        self._collect()
+        self.life, ev, ghostly = live_step(self.detector, self.life, image, dets, d2, jnp.asarray(trusted),
+                                           self.rates)
+        self._pending = (ghostly, trusted)
+        self.counts.frames += 1
+
+    def _collect(self) -> None:
         if self._pending is None:
             return
-        evidence, track_of, t_ev = self._pending
+        ghostly, trusted = self._pending
+        g = np.asarray(ghostly)
+        self.counts.ghost_detections += int(g.sum())
+        self.counts.trusted_ghosts += int((g & trusted).sum())
         self._pending = None
-        ev = np.asarray(evidence)
-        by_id = {tr.id: tr for tr in tracks}
-        for k, tid in track_of.items():
-            tr = by_id.get(tid)
-            if tr is None:
-                continue
-            if ev[k] < self.edge:
-                if tr.extra.get("ghost_since") is None:
-                    tr.extra["ghost_since"] = t_ev
-            else:
-                tr.extra["ghost_since"] = None
 
-    @staticmethod
-    def _static_for(tr: Track, t: float) -> float:
-        """Seconds ``tr`` has stood still (0 while it moves), from its recent positions."""
-        hist = tr.extra.setdefault("history", deque())
-        hist.append((t, float(tr.position[0]), float(tr.position[1])))
-        while len(hist) > 2 and t - hist[1][0] >= STATIC_S:
-            hist.popleft()
-        ts, xy = hist[0][0], np.array([[h[1], h[2]] for h in hist])
-        still = t - ts >= STATIC_S and np.max(np.hypot(*(xy - xy[-1]).T)) <= STATIC_M
-        if not still:
-            tr.extra["still_since"] = None
-            return 0.0
-        if tr.extra.get("still_since") is None:
-            tr.extra["still_since"] = ts
-        return t - tr.extra["still_since"]
+    def learned_share(self) -> float:
+        """Share of the floor's samples the background is sure of now."""
+        return float(learned_share(self.detector, self.life, self.learning_frames))
+
+    def summary(self) -> dict:
+        self._collect()
+        return {**self.counts.as_dict(), "learned_share_start": self.learned_at_start,
+                "learned_share_end": self.learned_share()}
 
 
 @dataclass
 class FrameResult:
     """One processed frame of :func:`detect_frames`: its index, time, the image, the detections
-    (NumPy, K slots), their floor points and the ``people`` lines ``omnijax detect`` writes, the tracks."""
+    (NumPy, K slots), the valid ones' floor points and the ``people`` lines ``omnijax detect``
+    writes, the tracks."""
 
     index: int
     t: float
@@ -196,25 +171,27 @@ class Perception:
     """Learning done, per frame: detector, floor positions, tracker, background's life (see the module
     docstring). The tracker has the real-time loop's defaults."""
 
-    def __init__(self, rig: Rig, bg, fps: float | None, trust: TrustRule | None = None, detector=None):
+    def __init__(self, rig: Rig, bg, fps: float | None, learning_frames: int, trust: TrustRule | None = None,
+                 detector=None):
         self.rig = rig
         self.detector = build_detector(rig) if detector is None else detector
         self.tracker = Tracker()
-        self.keeper = BackgroundKeeper(rig, self.detector, bg, trust or TrustRule(), fps)
+        self.keeper = BackgroundKeeper(rig, self.detector, bg, trust or TrustRule(), fps, learning_frames)
 
     def step(self, image: np.ndarray, t: float):
         x = jnp.asarray(image)
-        dets, _, z, R = jax.device_get(perceive(self.detector, self.rig, x, self.keeper.bg, self.keeper.lines))
+        dets_d, trace, z_d, R_d = perceive(self.detector, self.rig, x, self.keeper.lines)
+        dets, z, R = jax.device_get((dets_d, z_d, R_d))
         valid = np.nonzero(np.asarray(dets.valid))[0]
         tracks = self.tracker.step(t, np.asarray(z)[valid], np.asarray(R)[valid])
         slot_of = {tr.id: int(valid[tr.detection]) for tr in tracks if tr.detection is not None}
-        self.keeper.update(x, dets, slot_of, t, tracks)
+        self.keeper.update(x, dets_d, trace.d2, self.keeper.trusted(tracks, slot_of, len(dets.valid)))
         return dets, np.asarray(z)[valid], valid, tracks
 
 
 def people_lines(rig: Rig, dets, valid: np.ndarray) -> list[dict]:
     """The per-person objects of ``detections.jsonl`` (r_f, theta_f, the sigma rule's sigmas and the
-    detector's own, contrast, sector edges, radial extent)."""
+    detector's own, contrast, run edges, radial extent)."""
     s_r, s_t = (np.asarray(a) for a in detection_sigmas(rig, dets.sigma_r_f, dets.sigma_theta_f))
     return [{"r_f": float(dets.r_f[k]), "theta_f": float(dets.theta_f[k]), "sigma_r_f": float(s_r[k]),
              "sigma_theta_f": float(s_t[k]), "detector_sigma_r_f": float(dets.sigma_r_f[k]),
@@ -225,7 +202,8 @@ def people_lines(rig: Rig, dets, valid: np.ndarray) -> list[dict]:
 
 class DetectRun:
     """:func:`detect_frames`'s result: iterate for the :class:`FrameResult` of each processed frame;
-    ``learning_frames``, ``learned_share`` and ``perception`` (with the keeper's counts) once started."""
+    ``learning_frames`` (their indices), ``step_frames`` and ``perception`` (with the keeper) once
+    started."""
 
     def __init__(self, rig: Rig, frames: Iterable, fps: float | None, samples: int | None, seconds: float | None,
                  what: str, detector=None):
@@ -235,8 +213,7 @@ class DetectRun:
         self.fps = fps or DEFAULT_FPS
         self._frames = iter(frames)
         bg, self.learning_frames, self.read = learn_from_frames(self._frames, self.samples, self.step_frames, what)
-        self.perception = Perception(rig, bg, fps, detector=detector)
-        self.learned_share = self.perception.keeper.learned_share
+        self.perception = Perception(rig, bg, fps, self.samples, detector=detector)
 
     def __iter__(self) -> Iterator[FrameResult]:
         index = self.read
@@ -254,3 +231,7 @@ def detect_frames(rig: Rig, frames: Iterable, fps: float | None = None, samples:
     processed frames (see :class:`DetectRun`). ``samples`` and ``seconds`` override the rig's
     ``background_frames`` and ``background_seconds``."""
     return DetectRun(rig, frames, fps, samples, seconds, what, detector)
+
+
+__all__ = ["DEFAULT_FPS", "BackgroundKeeper", "DetectRun", "FrameResult", "LifeCounts", "Perception",
+           "detect_frames", "learn_from_frames", "learning_step", "life_rates", "people_lines"]

@@ -23,7 +23,7 @@ import cv2
 import jax
 import numpy as np
 
-from omnijax import Rig, build_detector, learn_background
+from omnijax import Rig, build_detector
 from omnijax.detection import polar_range
 from runtime.errors import UsageError, interrupted_during
 from runtime.events import EventLog
@@ -43,6 +43,7 @@ from runtime.realtime.overlay import (
     draw_tracks,
     track_pixels,
 )
+from runtime.realtime.perception import learn_from_frames, learning_step
 from runtime.realtime.sources import Capture
 
 
@@ -143,23 +144,6 @@ class Annotator:
         return {}
 
 
-def learn_from_source(frames_iter, n: int, what: str, step: int = 1):
-    """The background from ``n`` readable frames of ``frames_iter``, every ``step``-th (broken ones
-    skipped): spacing them out keeps people who stand still for a while out of the background.
-    Returns it and the number of frames read."""
-    got, read = [], 0
-    for img in frames_iter:
-        read += 1
-        if img is not None and (read - 1) % step == 0:
-            got.append(img)
-        if len(got) == n:
-            break
-    if len(got) < n:
-        raise UsageError(f"{what}: only {len(got)} readable frames, expected at least {n} to learn the background "
-                         "(--background-frames)")
-    return learn_background(np.stack(got)), read
-
-
 def chain_hooks(*hooks) -> Callable:
     """One ``on_frame`` hook calling each of ``hooks`` in turn and merging their log fields."""
     def on_frame(*args):
@@ -172,7 +156,7 @@ def chain_hooks(*hooks) -> Callable:
 
 
 def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=None, config: LoopConfig,
-                paced: bool = True, background_frames: int | None = None, background_step: int = 1,
+                paced: bool = True, background_frames: int | None = None, background_seconds: float | None = None,
                 video: bool = True, record: bool = False,
                 title: str = "omnijax", foveal: Callable | None = None, hooks: tuple = (), control_hooks: tuple = (),
                 finish: Callable | None = None, extra: dict | None = None, screenshot_at: int | None = None,
@@ -194,7 +178,7 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
         with interrupted_during("during start-up"):
             loop, annot, writer, recorder, first = _start(
                 rig, source, stage, driver=driver, profile=profile, config=config, paced=paced, n_bg=n_bg,
-                background_step=background_step, video=video, record=record, title=title, foveal=foveal,
+                background_seconds=background_seconds, video=video, record=record, title=title, foveal=foveal,
                 hooks=hooks, control_hooks=control_hooks, screenshot_at=screenshot_at, console=console, mqtt=mqtt)
         setup_s = time.monotonic() - t0
         loop.install_signal_handlers()
@@ -216,7 +200,7 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
             summary["console"] = {"url": console.url, "operator": loop.counts["operator_frames"]}
         view = stage / "view.png"
         summary.update({"source": source.name, "setup_s": setup_s, "background_frames": n_bg,
-                        "background_step": background_step, "first_frame": first, "ptz_homed": homed,
+                        "learning": loop.learning, "first_frame": first, "ptz_homed": homed,
                         "outputs": {"log": "log.jsonl", "events": "events.jsonl",
                                     **({"video": writer.name} if writer else {}),
                                     **({"record": recorder.name} if recorder else {}),
@@ -241,12 +225,14 @@ def _source_counters(source) -> dict | None:
 
 
 def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: LoopConfig, paced: bool, n_bg: int,
-           background_step: int, video: bool, record: bool, title: str, foveal, hooks: tuple,
+           background_seconds: float | None, video: bool, record: bool, title: str, foveal, hooks: tuple,
            control_hooks: tuple, screenshot_at: int | None, console=None, mqtt=None):
     """Start-up of :func:`run_session`: the background, the detector, the writers, the loop, compiled."""
     W, H = rig.omni.image_size
     frames = source.frames()
-    bg, first = learn_from_source(frames, n_bg, source.name, background_step)
+    seconds = rig.detection.background_seconds if background_seconds is None else background_seconds
+    step = learning_step(source.fps, n_bg, seconds)
+    bg, used, first = learn_from_frames(frames, n_bg, step, source.name)
     if bg.mean.shape[:2] != (H, W):
         raise UsageError(f"{source.name}: frames are {bg.mean.shape[1]}x{bg.mean.shape[0]}, "
                          f"expected {W}x{H} (omni.image_size of the rig)")
@@ -258,8 +244,9 @@ def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: Lo
     loop = RealTimeLoop(rig, detector, bg, capture, driver, profile, config, stage / "log.jsonl",
                         on_frame=chain_hooks(*hooks, annot if drawn else None),
                         on_control=chain_hooks(*control_hooks) if control_hooks else None,
-                        operator=console.operator if console is not None else None)
+                        operator=console.operator if console is not None else None, learning_frames=n_bg)
     annot.loop = loop
+    loop.learning = {"frames": n_bg, "seconds": seconds, "step": step, "frame_indices": used}
     live = console.attach(loop, rig, annot, stage, driver, profile) if console is not None else None
     sinks = tuple(s for s in (live.event if live is not None else None, mqtt) if s is not None)
     loop.events = EventLog(stage, face_image=lambda: annot.inset[0], sinks=sinks)

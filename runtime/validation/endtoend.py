@@ -244,9 +244,9 @@ class Trials(eqx.Module):
     lines_over: jax.Array
 
 
-def _observe(detector: Detector, bg, lines, image, theta_true):
-    det, others = match(detect(detector, image, bg, lines)[0], theta_true)
-    return det, others, jnp.sum(line_change(detector, image, lines) > detector.thresholds.lower)
+def _observe(detector: Detector, lines, image, theta_true):
+    det, others = match(detect(detector, image, lines)[0], theta_true)
+    return det, others, jnp.sum(line_change(detector, image, lines).sum(-1) > detector.thresholds.lower)
 
 
 def _truth_inputs(truth, true_rig: Rig):
@@ -256,7 +256,7 @@ def _truth_inputs(truth, true_rig: Rig):
 
 
 @eqx.filter_jit
-def _fresh_chunk(world: World, detector: Detector, bg, lines, keys, new_rig: bool = True) -> Trials:
+def _fresh_chunk(world: World, detector: Detector, lines, keys, new_rig: bool = True) -> Trials:
     """One rendered frame per key, each with a fresh person and sensor noise, and (``new_rig``) a
     fresh true rig."""
     def one(key):
@@ -268,7 +268,7 @@ def _fresh_chunk(world: World, detector: Detector, bg, lines, keys, new_rig: boo
                         (true_rig, people, noise))
         frame = render_frame(w, 0)
         tr = frame.truth
-        det, others, over = _observe(detector, bg, lines, frame.image, tr.theta_f[0])
+        det, others, over = _observe(detector, lines, frame.image, tr.theta_f[0])
         return Trials(det=det, x_true=_truth_inputs(tr, true_rig), head=tr.head[0], R_h=tr.R_h[0],
                       true_rig=true_rig, others=others, lines_over=over)
 
@@ -276,11 +276,11 @@ def _fresh_chunk(world: World, detector: Detector, bg, lines, keys, new_rig: boo
 
 
 @eqx.filter_jit
-def _noise_chunk(detector: Detector, bg, lines, linear, sigma, jpeg: int, keys, theta_true):
+def _noise_chunk(detector: Detector, lines, linear, sigma, jpeg: int, keys, theta_true):
     """The same noise-free frame exposed once per key (fresh sensor noise), then detected."""
     def one(key):
         image = expose(linear, sigma, jax.random.bits(key, (2,), jnp.uint32), jpeg)
-        return _observe(detector, bg, lines, image, theta_true)
+        return _observe(detector, lines, image, theta_true)
 
     return jax.vmap(one)(keys)
 
@@ -318,7 +318,7 @@ def trials(bench: Bench, foot, n: int, key, fresh: str, chunk: int = 25,
         chunk = min(chunk, n)
         for i in range(0, n, chunk):
             m = min(chunk, n - i)
-            parts.append(_head(_fresh_chunk(world, bench.detector, bench.bg, bench.lines, _keys(key, i, chunk),
+            parts.append(_head(_fresh_chunk(world, bench.detector, bench.lines, _keys(key, i, chunk),
                                             fresh == "rig"), m))
             if progress:
                 progress(m)
@@ -329,7 +329,7 @@ def trials(bench: Bench, foot, n: int, key, fresh: str, chunk: int = 25,
     chunk = min(2 * chunk, n)
     for i in range(0, n, chunk):
         m = min(chunk, n - i)
-        parts.append(_head(_noise_chunk(bench.detector, bench.bg, bench.lines, linear, sensor.noise_sigma,
+        parts.append(_head(_noise_chunk(bench.detector, bench.lines, linear, sensor.noise_sigma,
                                         sensor.jpeg_quality, _keys(key, i, chunk), tr.theta_f[0]), m))
         if progress:
             progress(m)

@@ -8,13 +8,16 @@ Per frame, detections and the people whose foot is in the image are matched one 
 on the floor distance between the detection's foot, eq 1 in the configured rig, and the true foot,
 gated at :data:`GATE_M`; the rule of the demo's scorer, :func:`match_feet`). A *miss* is a person
 whose foot end is visible and who got no detection; a *false alarm* a detection matching nobody.
+People whose foot stands inside the rig's blind disc under the camera (``[detection]
+min_floor_radius``: the detector places no foot there by design) are neither: they are not
+counted as missed, and a detection matching one is not a false alarm (``blind`` counts them).
 
 Each false alarm and miss gets one cause, the first that applies (the classifier knows the truth,
 not the detector's state, so it is approximate; docs/detection.md, "Per-cause figures"):
 
 false alarms
-  ``fragment``         a matched detection of a person stands within :data:`FRAGMENT_M` (a second
-                       detection of one person: a split sector, a shadow, the body beyond the model)
+  ``fragment``         a person matched by another detection stands within :data:`FRAGMENT_M` (a
+                       second detection of one person: the body beyond the model, a shadow)
   ``ghost_learning``   a person's foot was within :data:`SITE_M` in at least a fifth of the frames the
                        background was learnt from
   ``ghost_pause``      a person stood still within :data:`SITE_M` for :data:`PAUSE_S` or more
@@ -50,7 +53,7 @@ GATE_M = 0.5
 #: Cause classifier: a second detection of one person within FRAGMENT_M (m); a person's place
 #: within SITE_M (m); a pause of PAUSE_S (s) or more; two people within SAME_SECTOR_RAD (rad) of
 #: azimuth share a sector; the far field starts FAR_M (m) from the camera axis.
-FRAGMENT_M, SITE_M, PAUSE_S, SAME_SECTOR_RAD, FAR_M = 1.0, 0.6, 1.0, 0.35, 2.7
+FRAGMENT_M, SITE_M, PAUSE_S, SAME_SECTOR_RAD, FAR_M = 0.7, 0.6, 1.0, 0.35, 2.7
 #: A person counts as standing at a place in the learning frames when there in this share of them.
 LEARNING_SHARE = 0.2
 #: Bands of the true foot's floor radius (m) for the NEES.
@@ -144,8 +147,10 @@ def _longest_run(b: np.ndarray) -> int:
 class PerceptionScore:
     """Counts, causes and NEES over the frames scored (see the module docstring)."""
 
+    blind_radius_m: float = 0.0
     visible: int = 0
     misses: int = 0
+    blind: int = 0
     detections: int = 0
     false_alarms: int = 0
     frames: int = 0
@@ -161,7 +166,13 @@ class PerceptionScore:
         self.frames += 1
         persons = [q for q in truth["persons"] if q["in_image"]]
         foot = np.array([q["foot_m"] for q in persons]).reshape(-1, 2)
-        pairs = match_feet(z, foot)
+        blind = {c for c, q in enumerate(persons) if math.hypot(*q["foot_m"]) < self.blind_radius_m}
+        self.blind += len(blind)
+        if blind:  # a detection on a person under the camera is neither right nor wrong: left out
+            on_blind = {r for r, c, _ in match_feet(z, foot) if c in blind}
+            people, z, sigmas = self._drop(people, z, sigmas, on_blind)
+        seen = [c for c in range(len(persons)) if c not in blind]
+        pairs = [(r, seen[c], d) for r, c, d in match_feet(z, foot[seen])]
         det_of = {c: r for r, c, _ in pairs}
         person_of = {r: c for r, c, _ in pairs}
         for r, c, _ in pairs:
@@ -172,7 +183,7 @@ class PerceptionScore:
         out = {"missed": [], "false": []}
         unmatched = [k for k in range(len(people)) if k not in person_of]
         for c, q in enumerate(persons):
-            if not q["foot_visible"]:
+            if not q["foot_visible"] or c in blind:
                 continue
             self.visible += 1
             if c in det_of:
@@ -188,6 +199,12 @@ class PerceptionScore:
             self.fa_causes[cause] += 1
             out["false"].append({"xy": [round(float(v), 3) for v in z[k]], "cause": cause})
         return out
+
+    @staticmethod
+    def _drop(people, z, sigmas, which: set):
+        """``people``, ``z``, ``sigmas`` without the detections ``which`` (those on a blind person)."""
+        keep = [k for k in range(len(people)) if k not in which]
+        return [people[k] for k in keep], np.asarray(z).reshape(-1, 2)[keep], np.asarray(sigmas).reshape(-1, 2)[keep]
 
     @staticmethod
     def _fa_cause(frame, xy, z, person_of, foot, history) -> str:
@@ -230,7 +247,7 @@ class PerceptionScore:
         return out
 
     def summary(self) -> dict:
-        return {"frames": self.frames, "visible": self.visible, "misses": self.misses,
+        return {"frames": self.frames, "visible": self.visible, "misses": self.misses, "blind": self.blind,
                 "detections": self.detections, "false_alarms": self.false_alarms,
                 "miss_rate": self.misses / self.visible if self.visible else None,
                 "false_alarm_rate": self.false_alarms / self.detections if self.detections else None,

@@ -100,7 +100,7 @@ def test_ignore_zone_is_not_computed_and_hides_who_stands_there(paper_rig, paper
     for theta_p, seen_masked in ((1.0, False), (-2.0, True)):
         frame = jnp.asarray(_noisy(rng, _paint_person(rng, base, paper_detector, i, theta_p)))
         for det, expect in ((paper_detector, True), (masked, seen_masked)):
-            d, _ = detect(det, frame, bg, line_background(det, bg))
+            d, _ = detect(det, frame, line_background(det, bg))
             found = [float(t) for t, v in zip(np.asarray(d.theta_f), np.asarray(d.valid)) if v]
             near = [t for t in found if abs(math.remainder(t - theta_p, 2 * math.pi)) < 0.1]
             assert bool(near) == expect, (theta_p, found)

@@ -1,5 +1,6 @@
 """The loop's jitted kernels: `perceive` (detection and the tracker's floor measurements under the
-aim pipeline's sigma rule) and `update_background` (adaptation outside the people's sectors)."""
+aim pipeline's sigma rule) and `control_step` (the tracker and the aim pipeline fused). The
+background's life has its own tests (tests/omnijax/test_life.py)."""
 
 from __future__ import annotations
 
@@ -10,9 +11,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from omnijax import learn_background, line_background, sector_mask
+from omnijax import learn_background, line_background
 from omnijax.geometry import floor_measurement
-from runtime.realtime.loop import perceive, update_background
+from runtime.realtime.loop import perceive
 from tests.omnijax.test_detection import _noisy, _paint_person, _textured
 
 
@@ -29,7 +30,7 @@ def scene(paper_detector):
 
 def test_perceive_measures_the_detections_on_the_floor_with_the_sigma_rule(paper_detector, paper_rig, scene):
     bg, lines, frame, i = scene
-    dets, _, z, R = perceive(paper_detector, paper_rig, frame, bg, lines)
+    dets, _, z, R = perceive(paper_detector, paper_rig, frame, lines)
     valid = np.asarray(dets.valid)
     assert valid.sum() == 1
     k = int(np.argmax(valid))
@@ -46,28 +47,6 @@ def test_perceive_measures_the_detections_on_the_floor_with_the_sigma_rule(paper
     assert z.shape == (dets.r_f.shape[0], 2) and R.shape == (dets.r_f.shape[0], 2, 2)
 
 
-def test_update_background_adapts_outside_the_sectors_only(paper_detector, paper_rig, scene):
-    bg, lines, frame, _ = scene
-    dets = perceive(paper_detector, paper_rig, frame, bg, lines)[0]
-    W, H = paper_rig.omni.image_size
-    theta_map = jnp.asarray(paper_rig.omni.to_polar(*np.meshgrid(np.arange(W), np.arange(H)))[1], jnp.float32)
-    rate = 0.05
-    new, new_lines = update_background(paper_detector, bg, frame, theta_map, dets, rate)
-    k = int(np.argmax(np.asarray(dets.valid)))
-    inside = np.asarray(sector_mask(theta_map, dets))
-    off = np.abs(np.angle(np.exp(1j * (np.asarray(theta_map) - float(dets.theta_f[k])))))
-    assert inside[off < 0.02].all() and not inside[off > 1.0].any()  # the person's sector, and only it
-    mean, old, f = np.asarray(new.mean), np.asarray(bg.mean), np.asarray(frame, np.float32)
-    np.testing.assert_array_equal(mean[inside], old[inside])
-    np.testing.assert_allclose(mean[~inside], (old + rate * (f - old))[~inside], rtol=1e-6, atol=1e-3)
-    vf = np.asarray(new.var_factor)
-    np.testing.assert_array_equal(vf[inside], np.asarray(bg.var_factor)[inside])
-    np.testing.assert_allclose(vf[~inside], ((1 - rate) ** 2 * np.asarray(bg.var_factor) + rate**2)[~inside],
-                               rtol=1e-6)
-    for a, b in zip(jax.tree.leaves(new_lines), jax.tree.leaves(line_background(paper_detector, new))):
-        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
-
-
 def test_control_step_is_the_tracker_and_the_aim_pipeline_fused(paper_detector, paper_rig, scene):
     """The one per-frame call against its parts called one by one: a confirmed track near the painted
     person is updated as Tracker.step updates it, and aimed at as aim_at_floor aims at its head
@@ -81,7 +60,7 @@ def test_control_step_is_the_tracker_and_the_aim_pipeline_fused(paper_detector, 
     from runtime.realtime.tracker import Track, Tracker
 
     bg, lines, frame, _ = scene
-    dets, _, z, R = perceive(paper_detector, paper_rig, frame, bg, lines)
+    dets, _, z, R = perceive(paper_detector, paper_rig, frame, lines)
     valid = np.asarray(dets.valid)
     k = int(np.argmax(valid))
     zk = np.asarray(z[k])
@@ -93,7 +72,7 @@ def test_control_step_is_the_tracker_and_the_aim_pipeline_fused(paper_detector, 
     sent = (0.3, -0.6)
     slew = Slew(known=jnp.asarray(True), pan=jnp.asarray(sent[0]), tilt=jnp.asarray(sent[1]),
                 pan_deg_s=jnp.asarray(300.0), tilt_deg_s=jnp.asarray(125.0), latency_s=jnp.asarray(0.03))
-    c = control_step(paper_detector, paper_rig, frame, bg, lines, tracker.slots(32), jnp.asarray(1.0), 1.5, 0.8,
+    c = control_step(paper_detector, paper_rig, frame, lines, tracker.slots(32), jnp.asarray(1.0), 1.5, 0.8,
                      slew, mode="kalman", confirm=2)
     assign = np.asarray(c.assign)
     assert assign[0] == k and (assign[1:] == -1).all()

@@ -1,0 +1,188 @@
+"""Steps 5-6 for several people per sector: psi2 at every line, and the people it holds one at a time.
+
+The paper (section 3.2.6) takes one windowed profile per psi1 sector, along the sector's centre
+line, and one foot on it (eq 11-12). A sector holds two people whenever they stand side by side
+or one behind the other as the camera sees them, and the paper's estimate then finds one of them
+(or neither: a foot between the two). This module goes beyond the paper (docs/detection.md,
+"More than one person per sector"):
+
+1. **psi2 at every line** of the psi1 sectors (:func:`window_sums`): the windowed profile is the
+   sum of d^2 over the polar samples across the line, ``window_lines[r]`` lines each side (the
+   paper's window: a person's width at that radius), one circular cumulative sum for all lines.
+2. **One person at a time** (:func:`find_people`, a ``lax.scan`` of ``max_people`` steps):
+   - eq 12 (corrected) on every line's profile gives that line's best foot hypothesis ``i`` and
+     the excess d^2 it holds over the background's mean, ``excess = sum (d2 - dof)``;
+   - the line of largest excess among those whose hypothesis is a person is the next person:
+     its contrast over its samples not yet explained (the non-centrality per sample, eq 9's
+     ``c``) at least :data:`CONTRAST_FACTOR` times ``c_min``, and at least :data:`SUPPORT` of its
+     radii with a significant profile (the psi2 threshold for ``x_f``);
+   - its lines (:func:`person_lines`): the run of lines around that line whose d^2 over the
+     person's radii is significant, cut where the angular profile dips and rises again (a
+     second person beside the first: a valley between two humps), never wider than
+     :data:`RUN_WIDTHS` times the person's width; its centre line is the run's middle (the
+     paper's theta_f, per person), and the foot is eq 12's on the profile there;
+   - its samples are *explained*: over its lines (and at least the model's width around its
+     centre) and its radii (from its foot to the top of a person :data:`TALL_SIGMAS` standard
+     deviations taller than the prior), d^2 is set to the background's mean, so that no later
+     step finds the same person again and the next person is sought in what is left.
+3. Two people's feet are at least a shoulder width apart; two detections whose feet are closer
+   than :data:`MERGE_M` on the floor are one person's fragments and the weaker goes
+   (:func:`merge_fragments`, the one place where detections are merged).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+from ._polar import PolarIndex
+
+#: A person's contrast over its unexplained samples must reach CONTRAST_FACTOR x ``c_min``.
+CONTRAST_FACTOR = 2.0
+#: Share of a person's radii whose psi2 profile must be significant.
+SUPPORT = 0.25
+#: A person's run of lines is at most RUN_WIDTHS times its model width (a sector of one person).
+RUN_WIDTHS = 1.5
+#: The run stops where the angular profile has fallen below VALLEY of its value at the person's
+#: line and rises again (a valley between two people).
+VALLEY = 0.6
+#: Explained: the model's width plus MARGIN_LINES each side; radii from MARGIN_R before the foot
+#: to MARGIN_R past the top of a person TALL_SIGMAS prior standard deviations taller.
+MARGIN_LINES, MARGIN_R, TALL_SIGMAS = 1, 3, 3.0
+#: Feet closer than this on the floor (m) are one person's (two people's are a shoulder width apart).
+MERGE_M = 0.45
+#: Lines searched either side of a person's line for its run (the widest person near the axis).
+REACH = 64
+
+
+class People(eqx.Module):
+    """Up to K people found in one frame, strongest first (``valid`` marks the real ones).
+
+    ``i``: the foot hypothesis (index into the polar radii); ``centre``: the centre line
+    (fractional line index); ``first``/``last``: the run of lines (``last`` may pass ``T - 1``);
+    ``contrast``: non-centrality per sample over the unexplained samples; ``excess``: d^2 above
+    the background's mean on the person's profile; ``support``: share of significant radii;
+    ``visible``: share of the person's window samples that no earlier person explained;
+    ``explained``: the samples this person explained, as (first line, last line, first radius,
+    end radius), the region the background's life repairs when it is a ghost.
+    """
+
+    valid: Bool[Array, " K"]
+    i: Int[Array, " K"]
+    centre: Float[Array, " K"]
+    first: Int[Array, " K"]
+    last: Int[Array, " K"]
+    contrast: Float[Array, " K"]
+    excess: Float[Array, " K"]
+    support: Float[Array, " K"]
+    visible: Float[Array, " K"]
+    explained: Int[Array, "K 4"]
+
+
+def window_sums(x: Float[Array, "T R"], half: Int[Array, " R"]) -> Float[Array, "T R"]:
+    """Sum of ``x`` over lines ``t - half[r] .. t + half[r]`` (circular in t) at every (t, r)."""
+    T = x.shape[0]
+    H = x.shape[0] // 2
+    padded = jnp.concatenate([x[T - H:], x, x[:H]], 0)
+    c = jnp.concatenate([jnp.zeros((1, x.shape[1]), x.dtype), jnp.cumsum(padded, 0)], 0)
+    t = jnp.arange(T)[:, None]
+    return jnp.take_along_axis(c, t + H + half[None] + 1, 0) - jnp.take_along_axis(c, t + H - half[None], 0)
+
+
+def _prefix(x):
+    return jnp.concatenate([jnp.zeros((x.shape[0], 1), x.dtype), jnp.cumsum(x, 1)], 1)
+
+
+def _span(P, a, b):
+    """Row-wise ``P[t, b[t]] - P[t, a[t]]`` of a prefix-sum table."""
+    return jnp.take_along_axis(P, b[:, None], 1)[:, 0] - jnp.take_along_axis(P, a[:, None], 1)[:, 0]
+
+
+def person_lines(excess_line: Float[Array, " L"], hw) -> tuple[Array, Array]:
+    """The run of lines of the person at offset 0 of ``excess_line`` (its d^2 excess per line over
+    its radii, offsets ``-REACH .. REACH``): offsets ``(left, right)``, bounded by significance
+    (``excess_line > 0``), the valley rule and :data:`RUN_WIDTHS` x ``hw`` (the model's half width)."""
+    peak = jnp.maximum(excess_line[REACH], 1e-6)
+    limit = jnp.ceil(RUN_WIDTHS * hw).astype(jnp.int32) + 1
+
+    def side(values):  # offsets 1 .. REACH going outward
+        prev = jnp.concatenate([values[:1], values[:-1]])
+        low = jax.lax.cummin(values) < VALLEY * peak
+        stop = (values <= 0) | (low & (values > prev)) | (jnp.arange(1, REACH + 1) > limit)
+        return jnp.argmax(jnp.concatenate([stop, jnp.ones(1, bool)]))  # lines kept on this side
+
+    right = side(excess_line[REACH + 1:])
+    left = side(excess_line[:REACH][::-1])
+    return -left, right
+
+
+def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T R"], candidate: Bool[Array, " T"],
+                window: Float[Array, " R"], c_min, dof_per_sample: int, sigma_H_p, max_people: int) -> People:
+    """Step 5-6 per person (see the module docstring) on the frame's polar d^2 (``ok`` 1 where a
+    sample counts), among the ``candidate`` lines (the psi1 sectors); ``window`` the psi2
+    significance threshold per radius."""
+    T, R = d2.shape
+    step = 2 * jnp.pi / T
+    half = polar.window_lines
+    out = polar.hyp_out
+    r_idx = jnp.arange(R)
+    line_idx = jnp.arange(T)
+    n_all = _prefix(window_sums(ok, half))
+    dps = dof_per_sample
+
+    def one(carry, _):
+        d2, explained = carry
+        Q = window_sums(d2, half)
+        PQ = _prefix(Q)
+        eq12 = jnp.where(polar.hyp_ok[None], 2 * (PQ[:, out] - PQ[:, :-1]) - PQ[:, -1:], -jnp.inf)
+        i_line = jnp.argmax(eq12, 1)
+        o_line = out[i_line]
+        n_line = jnp.maximum(_span(n_all, i_line, o_line), 1.0)
+        vis_line = _span(_prefix(window_sums(ok * (1.0 - explained), half)), i_line, o_line)
+        excess = _span(PQ, i_line, o_line) - dps * n_line  # explained samples hold exactly dps
+        contrast = excess / jnp.maximum(vis_line, 1.0)
+        support = _span(_prefix((Q > window[None]).astype(jnp.float32)), i_line, o_line) / jnp.maximum(
+            o_line - i_line, 1)
+        person = candidate & (contrast >= CONTRAST_FACTOR * c_min) & (support >= SUPPORT)
+        score = jnp.where(person, excess, -jnp.inf)
+        t0 = jnp.argmax(score)
+        found = jnp.isfinite(score[t0])
+        i0 = i_line[t0]
+        hw = 0.5 * polar.hyp_width[i0] / step  # the model's half width, lines
+        rad = (r_idx >= i0) & (r_idx < out[i0])
+        ring = (t0 + jnp.arange(-REACH, REACH + 1)) % T
+        per_line = jnp.sum(jnp.where(rad[None], d2[ring] - dps * ok[ring], 0.0), 1)
+        sig = per_line - 0.5 * c_min * jnp.sum(jnp.where(rad[None], ok[ring], 0.0), 1)
+        left, right = person_lines(sig, hw)
+        first, last = t0 + left, t0 + right
+        centre = 0.5 * (first + last)
+        tc = jnp.floor(centre).astype(jnp.int32) % T
+        i = i_line[tc]
+        # explain: the run and the model's width around the centre, the person's radii (tall)
+        k = jnp.ceil(0.5 * polar.hyp_width[i] / step).astype(jnp.int32) + MARGIN_LINES
+        e_first, e_last = jnp.minimum(first - MARGIN_LINES, tc - k), jnp.maximum(last + MARGIN_LINES, tc + k)
+        tall = jnp.ceil(TALL_SIGMAS * sigma_H_p * polar.hyp_dout_dH[i]).astype(jnp.int32)
+        r0 = jnp.maximum(jnp.minimum(i, i0) - MARGIN_R, 0)
+        r1 = jnp.minimum(jnp.maximum(out[i], out[i0]) + tall + MARGIN_R, R)
+        in_lines = (line_idx - e_first) % T <= e_last - e_first
+        on = found & in_lines[:, None] & (r_idx[None] >= r0) & (r_idx[None] < r1)
+        d2 = jnp.where(on, dps * ok, d2)
+        visible = vis_line[t0] / n_line[t0]
+        rec = dict(valid=found, i=i, centre=centre, first=first, last=last, contrast=contrast[t0],
+                   excess=excess[t0], support=support[t0], visible=visible,
+                   explained=jnp.stack([e_first, e_last, r0, r1]))
+        return (d2, explained | on), rec
+
+    _, people = jax.lax.scan(one, (d2, jnp.zeros(d2.shape, bool)), None, length=max_people)
+    return People(**people)
+
+
+def merge_fragments(valid: Bool[Array, " K"], floor_xy: Float[Array, "K 2"]) -> Bool[Array, " K"]:
+    """``valid`` less every detection whose foot lies within :data:`MERGE_M` of an earlier (stronger)
+    valid one's on the floor."""
+    d = jnp.linalg.norm(floor_xy[:, None] - floor_xy[None], axis=-1)
+    idx = jnp.arange(valid.shape[0])
+    beaten = jnp.any(valid[None] & (d < MERGE_M) & (idx[None] < idx[:, None]), axis=1)
+    return valid & ~beaten

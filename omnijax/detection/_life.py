@@ -1,0 +1,199 @@
+"""The background's life after learning: learning what was not learnt, drift, ghost repair and
+absorption, on the polar samples the detector reads (docs/design.md section 4, "The background's
+life"; docs/detection.md, "The background's life").
+
+The paper learns a background once; a system that runs for hours must keep it right. One jitted
+call per frame (:func:`live_step`), after detection, with the frame's d^2 (the detector's trace):
+
+1. **Ghost evidence** of each detection (:func:`ghost_evidence`): is there an object's edge in the
+   *current* image at the sides of the person's run of lines? At each radius of the person where
+   the sample just inside an edge line has changed, the least d^2 between it and the samples a few
+   pixels outside that edge, in the current frame (``edge_now``) and in the background
+   (``edge_before``); the smaller of the two sides, averaged over the radii. A person (standing
+   too) differs from the floor beside them: hundreds. A ghost (the background still holds someone
+   who has gone, or a piece of furniture moved away) shows floor continuing the floor beside it,
+   about 1, while the background there had an edge. Chromaticity makes this hold under shadows and
+   the floor's shading. The caller says which detections are trusted people (their tracks walked
+   in): those are ghosts only with both signs (no edge now, an edge :data:`GHOST_RATIO` times
+   stronger before); the others when there is no edge now (``edge_now < edge``), which also covers
+   a lamp of another colour switching on a bare floor.
+2. **Repair**: a sample that has changed, stayed unchanged from frame to frame (still) for
+   ``still_frames`` and lain in a ghost's region for ``ghost_frames`` is re-learnt from the current
+   frame (its variance factor 1: one frame's estimate).
+3. **Absorption**: a sample that has changed and stayed still for ``absorb_frames`` outside the
+   region of every trusted person is learnt as it is now (a chair moved and left, a coat dropped).
+   A person who stops is in a trusted person's region and is never absorbed.
+4. **Drift and learning**: a sample that has not changed and lies outside every detection's
+   region follows the frames at ``adapt_rate``, or faster while it has been learnt from fewer
+   frames than the learning took (a mean of the frames it has been seen unoccupied in): what the
+   learning could not settle, because someone stood there through most of it, is learnt as soon
+   as it is free. Nothing detected and nothing changed is ever learnt, so a person who stops is
+   not absorbed by drift.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, UInt8
+
+from ._change import AGREE, change_measure
+from ._detector import Detections, Detector, LineBackground, lines_from
+from ._indexing import gather_rgb
+
+#: d^2 of a changed sample: the chi-square(2) 1 - 1e-3 quantile (a background sample exceeds it once
+#: in 1,000); also what "unchanged from the previous frame" means.
+CHANGED = AGREE
+#: A trusted person's detection is a ghost only if the edge before was GHOST_RATIO times the edge now.
+GHOST_RATIO = 4.0
+#: Ghost evidence: the sample inside an edge line lies INNER_PX inside it; the samples outside it
+#: FLANK_PX pixels out.
+INNER_PX, FLANK_PX = 1.5, (3.0, 5.0, 7.0)
+
+
+class Life(eqx.Module):
+    """The background at the polar samples and what its life keeps per sample: ``seen`` (frames its
+    colour was learnt from, capped), ``prev`` (the last frame's colour), ``still`` (frames it has been
+    changed and unchanged from frame to frame), ``ghost`` (frames it has lain, changed, in a ghost's
+    region)."""
+
+    lines: LineBackground
+    seen: Float[Array, "T R"]
+    prev: Float[Array, "T R 3"]
+    still: Float[Array, "T R"]
+    ghost: Float[Array, "T R"]
+
+
+def start_life(lines: LineBackground) -> Life:
+    """A life starting from a learnt background's polar samples (``seen`` from its variance factor:
+    the learning frames each sample kept)."""
+    seen = 1.0 / jnp.maximum(lines.var_factor, 1e-6)
+    zeros = jnp.zeros(seen.shape, jnp.float32)
+    return Life(lines=lines, seen=seen.astype(jnp.float32), prev=lines.mean, still=zeros, ghost=zeros)
+
+
+class Evidence(eqx.Module):
+    """Per detection: the edge at its sides now and in the background (mean least d^2; ``inf`` where
+    no changed sample was measured), and the radii measured."""
+
+    edge_now: Float[Array, " K"]
+    edge_before: Float[Array, " K"]
+    samples: Float[Array, " K"]
+
+
+def ghost_evidence(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBackground,
+                   d2: Float[Array, "T R"], dets: Detections) -> Evidence:
+    """Step 1 of the module docstring for every detection (``cur``: the frame at the polar samples,
+    ``d2`` its change against ``lines``)."""
+    polar = detector.polar
+    T, R = d2.shape
+    step = 2 * jnp.pi / T
+    spacing = polar.radii * step  # px between neighbouring lines at each radius
+    inner = jnp.ceil(INNER_PX / spacing).astype(jnp.int32)  # (R,)
+    flank = jnp.stack([jnp.ceil(px / spacing).astype(jnp.int32) for px in FLANK_PX])  # (F, R)
+    first = jnp.round(dets.theta_l / step).astype(jnp.int32)
+    width = jnp.round(((dets.theta_r - dets.theta_l) % (2 * jnp.pi)) / step).astype(jnp.int32)
+    last = first + width
+    r = jnp.arange(R)
+    i_in = jnp.round(dets.r_in - polar.radii[0]).astype(jnp.int32)
+    i_out = jnp.round(dets.r_out - polar.radii[0]).astype(jnp.int32)
+    radial = (r[None] >= i_in[:, None]) & (r[None] < i_out[:, None])  # (K, R)
+    ok = polar.line_ok
+    changed = (d2 > CHANGED) & ok
+    sigma = lines.sigma
+
+    def side(edge_line, out):
+        """(now, before, measured) at each radius for the edge at ``edge_line`` (K,), outward ``out`` (+-1):
+        the sample inside it against the samples outside it."""
+        a = (edge_line[:, None] - out * jnp.minimum(inner[None], width[:, None] // 2)) % T  # (K, R)
+        b = (edge_line[:, None, None] + out * flank[None]) % T  # (K, F, R)
+        rr = jnp.broadcast_to(r, a.shape)
+        rb = jnp.broadcast_to(r, b.shape)
+        sig = jnp.broadcast_to(sigma[a, rr][:, None], b.shape)
+
+        def least(colours, var_factor):
+            inside = jnp.broadcast_to(colours[a, rr][:, None], (*b.shape, 3))
+            d = change_measure(inside, colours[b, rb], var_factor[b, rb], sig)
+            return jnp.min(jnp.where(ok[b, rb], d, jnp.inf), axis=1)
+
+        now = least(cur, jnp.ones_like(lines.var_factor))
+        before = least(lines.mean, lines.var_factor)
+        return now, before, changed[a, rr] & radial
+
+    n_l, b_l, m_l = side(first, -1)
+    n_r, b_r, m_r = side(last, 1)
+    now = jnp.minimum(jnp.where(m_l, n_l, jnp.inf), jnp.where(m_r, n_r, jnp.inf))
+    before = jnp.minimum(jnp.where(m_l, b_l, jnp.inf), jnp.where(m_r, b_r, jnp.inf))
+    measured = (m_l | m_r) & jnp.isfinite(now) & jnp.isfinite(before)
+    n = jnp.sum(measured, 1)
+    mean = lambda x: jnp.where(n > 0, jnp.sum(jnp.where(measured, x, 0.0), 1) / jnp.maximum(n, 1), jnp.inf)
+    return Evidence(edge_now=mean(now), edge_before=mean(before), samples=n.astype(jnp.float32))
+
+
+def regions(dets: Detections, which: Bool[Array, " K"], shape) -> Bool[Array, "T R"]:
+    """The polar samples inside the explained region of any detection in ``which``."""
+    T, R = shape
+    t, r = jnp.arange(T), jnp.arange(R)
+    first, last, r0, r1 = (dets.region[:, j] for j in range(4))
+    in_lines = (t[None] - first[:, None]) % T <= (last - first)[:, None]  # (K, T)
+    in_radii = (r[None] >= r0[:, None]) & (r[None] < r1[:, None])  # (K, R)
+    return jnp.any(which[:, None, None] & in_lines[:, :, None] & in_radii[:, None, :], axis=0)
+
+
+class LifeRates(eqx.Module):
+    """The life's time constants in frames (from the rig's ``[detection]`` seconds and the frame rate,
+    :func:`runtime.realtime.perception.life_rates`) and the drift rate per frame."""
+
+    adapt_rate: Float[Array, ""]
+    edge: Float[Array, ""]
+    still_frames: Float[Array, ""]
+    ghost_frames: Float[Array, ""]
+    absorb_frames: Float[Array, ""]
+    learn_frames: Float[Array, ""]
+
+
+@jax.jit
+def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: Detections,
+              d2: Float[Array, "T R"], trusted: Bool[Array, " K"], rates: LifeRates) -> tuple[Life, Evidence, Array]:
+    """One frame of the background's life (see the module docstring) after ``dets`` were detected in
+    ``frame`` against ``life.lines`` with change ``d2``; ``trusted`` marks the detections the caller
+    knows to be people who walked in. Returns the new life, each detection's evidence, and which
+    detections were judged ghosts."""
+    polar = detector.polar
+    lines = life.lines
+    cur = gather_rgb(jnp.asarray(frame), polar.line_index).astype(jnp.float32)
+    ok = polar.line_ok
+    changed = (d2 > CHANGED) & ok
+    ev = ghost_evidence(detector, cur, lines, d2, dets)
+    valid = dets.valid
+    sure_ghost = (ev.edge_before > GHOST_RATIO * ev.edge_now) & (ev.edge_now < rates.edge)
+    ghostly = valid & jnp.where(trusted, sure_ghost, ev.edge_now < rates.edge)
+    shape = d2.shape
+    in_ghost = regions(dets, ghostly, shape)
+    people = regions(dets, valid & ~ghostly, shape)
+    protected = regions(dets, valid & trusted & ~ghostly, shape)
+    occupied = regions(dets, valid, shape)
+    static = change_measure(cur, life.prev, 1.0, lines.sigma) < CHANGED
+    still = jnp.where(changed & static, life.still + 1.0, 0.0)
+    ghost = jnp.where(changed & in_ghost & ~people, life.ghost + 1.0, 0.0)
+    repair = changed & (ghost >= rates.ghost_frames) & (still >= rates.still_frames)
+    absorb = changed & (still >= rates.absorb_frames) & ~protected
+    fix = (repair | absorb) & ok
+    free = ok & ~changed & ~occupied
+    learning = life.seen < rates.learn_frames - 0.5  # kept in fewer frames than the learning took
+    a = jnp.where(free, jnp.where(learning, jnp.maximum(rates.adapt_rate, 1.0 / (life.seen + 1.0)),
+                                  rates.adapt_rate), 0.0)
+    mean = jnp.where(fix[..., None], cur, lines.mean + a[..., None] * (cur - lines.mean))
+    var_factor = jnp.where(fix, 1.0, (1 - a) ** 2 * lines.var_factor + a * a)
+    seen = jnp.where(fix, 1.0, jnp.minimum(life.seen + free, rates.learn_frames))
+    new = Life(lines=lines_from(mean, var_factor, lines.sigma), seen=seen, prev=cur,
+               still=jnp.where(fix, 0.0, still), ghost=jnp.where(fix, 0.0, ghost))
+    return new, ev, ghostly
+
+
+def learned_share(detector: Detector, life: Life, frames: float) -> Array:
+    """Share of the polar samples learnt from at least two thirds of ``frames`` frames (the learning's
+    count): the floor the background is sure of."""
+    ok = detector.polar.line_ok
+    return jnp.sum(ok & (life.seen >= 2.0 / 3.0 * frames - 1e-3)) / jnp.maximum(jnp.sum(ok), 1)
