@@ -12,7 +12,6 @@ from omnijax import detect, learn_background, line_background
 from omnijax.detection import LifeRates, learned, live_step, start_life
 from tests.omnijax.test_detection import _noisy, _paint_person
 
-
 #: Frames in these tests: a changed sample must stay still STILL frames and lie in a ghost GHOST frames
 #: before it is repaired; what stays still ABSORB frames is absorbed.
 STILL, GHOST, ABSORB = 2, 3, 12
