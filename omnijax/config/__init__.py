@@ -9,6 +9,8 @@ from ._config import (
     INPUT_NAMES as INPUT_NAMES,
     INPUT_UNITS as INPUT_UNITS,
     LAYOUT_NAMES as LAYOUT_NAMES,
+    MAX_PTZS as MAX_PTZS,
+    PTZ as PTZ,
     Detection as Detection,
     Foveal as Foveal,
     LayoutSearch as LayoutSearch,
