@@ -138,17 +138,28 @@ def floor_statistic(v: Float[Array, " n"], w: Float[Array, " n"], statistic: str
     weighted power mean of order ``sense * q``, ``(sum w v^(sense q) / sum w)^(1 / (sense q))``,
     a smooth stand-in that approaches the worst case from the better side as q grows.
     """
-    total = jnp.sum(w)
     if statistic == "mean":
-        return jnp.sum(w * v) / total
+        return jnp.sum(w * v) / jnp.sum(w)
     if statistic != "worst":
         raise ValueError(f"statistic must be one of {STATISTICS}, got {statistic!r}")
-    use = w > 0
     if sharpness is None:
-        return sense * jnp.max(jnp.where(use, sense * v, -jnp.inf))
-    order = sense * sharpness
-    log_v = jnp.log(jnp.maximum(jnp.where(use, v, 1.0), _TINY))
-    return jnp.exp((logsumexp(order * log_v, b=w) - jnp.log(total)) / order)
+        return sense * jnp.max(jnp.where(w > 0, sense * v, -jnp.inf))
+    return power_mean(v, w, sense * sharpness)
+
+
+def power_mean(v: Float[Array, "*a n"], w: Float[Array, "*a n"], order, axis: int | None = None) -> Array:
+    """Weighted power mean ``(sum w v^order / sum w)^(1 / order)`` of positive ``v`` over ``axis`` (all
+    axes: ``None``), in logarithms (finite for any order). It approaches the largest ``v`` of positive
+    weight as ``order`` grows, the smallest as it falls, from the mean's side. Where every weight
+    along ``axis`` is 0 it is 1, with zero gradient (the double-``where`` of a guarded division)."""
+    total = jnp.sum(w, axis=axis, keepdims=True)
+    some = total > 0
+    w_safe = jnp.where(some, w, 1.0)
+    log_v = jnp.log(jnp.maximum(jnp.where(w_safe > 0, v, 1.0), _TINY))
+    log_mean = (logsumexp(order * log_v, axis=axis, b=w_safe, keepdims=True)
+                - jnp.log(jnp.sum(w_safe, axis=axis, keepdims=True))) / order
+    out = jnp.where(some, jnp.exp(log_mean), 1.0)
+    return jnp.squeeze(out, axis=axis) if axis is not None else out.reshape(())
 
 
 def summarise(rig: Rig, fv: FloorValues) -> dict[str, Array]:
