@@ -249,7 +249,8 @@ class CamerasResult:
 
     ``x``: box values (k, 3) of the best placements; ``layouts``: their D_c, H_f, theta_c (k,);
     ``values``: every camera's per-point values there (k, n, padding removed); ``summary``: every
-    statistic and the framing; ``grid_x``/``grid_objective``: the grid's best set of candidates.
+    statistic and the framing; ``grid_x``, ``grid_layouts``, ``grid_objective``: the grid's best set of
+    candidates.
     """
 
     k: int
@@ -260,6 +261,7 @@ class CamerasResult:
     values: FloorValues
     starts: list[CameraStart]
     grid_x: np.ndarray
+    grid_layouts: dict[str, np.ndarray]
     grid_objective: float
     grid_method: str
     polished_from_grid: bool
@@ -392,6 +394,11 @@ class Cameras:
             i += 1
         return [box.inset(p) for p in points[:count]]
 
+    def placements(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """D_c, H_f and theta_c (k,) of box values ``x`` (k, 3)."""
+        layouts = self.cbox.placements(jnp.asarray(x, float), self.rig.omni.H_o)
+        return {n: np.asarray(getattr(layouts, n)) for n in ("D_c", "H_f", "theta_c")}
+
     def _box_values(self, one: Rig) -> np.ndarray:
         """A configured PTZ's placement as box values (reach as the share of the way to its wall)."""
         theta, D_c = float(one.foveal.theta_c), float(one.foveal.D_c)
@@ -455,7 +462,8 @@ class Cameras:
         tick("maps", True)
         return CamerasResult(
             k=k, x=best.x, layouts=layouts, objective=summ[self.key], summary=summ, values=fv, starts=starts,
-            grid_x=grid_x, grid_objective=grid_objective, grid_method=method, polished_from_grid=polished,
+            grid_x=grid_x, grid_layouts=self.placements(grid_x), grid_objective=grid_objective,
+            grid_method=method, polished_from_grid=polished,
             on_bound=[self.cbox.box.bound_side(x) for x in best.x], start_objective=start_summ[self.key],
             start_summary=start_summ, seconds={"grid": t1 - t0, "search": t2 - t1,
                                                "maps": time.perf_counter() - t2},
