@@ -45,12 +45,13 @@ _TINY = 1e-30
 
 
 class Layout(eqx.Module):
-    """A PTZ placement: ``D_c`` (m), ``H_f`` (m), ``theta_c`` (rad), and the omni camera's ``H_o`` (m)."""
+    """A PTZ placement: ``D_c`` (m), ``H_f`` (m), ``theta_c`` (rad), and the omni camera's ``H_o`` (m);
+    scalars, or of shape (k,) for k cameras (or k layouts) at once."""
 
-    D_c: Float[Array, ""]
-    H_f: Float[Array, ""]
-    theta_c: Float[Array, ""]
-    H_o: Float[Array, ""]
+    D_c: Float[Array, "*k"]
+    H_f: Float[Array, "*k"]
+    theta_c: Float[Array, "*k"]
+    H_o: Float[Array, "*k"]
 
     def as_dict(self) -> dict[str, float]:
         return {"D_c": float(self.D_c), "H_f": float(self.H_f), "theta_c": float(self.theta_c),
@@ -73,20 +74,20 @@ def place(rig: Rig, layout: Layout) -> Rig:
 class FloorValues(eqx.Module):
     """Per floor point: the pointing's variances (rad^2; and of sin pan, tan tilt, eq 14 and 13's
     quantities), zoom, face pixels, whether ``p_contain`` is met, the PTZ's floor distance D_p (m),
-    and the point's weight in the statistics (0 to 1)."""
+    and the point's weight in the statistics (0 to 1); with a leading axis k for k cameras."""
 
-    var_pan: Float[Array, " n"]
-    var_tilt: Float[Array, " n"]
-    var_sin_pan: Float[Array, " n"]
-    var_tan_tilt: Float[Array, " n"]
-    zoom: Float[Array, " n"]
-    face_px: Float[Array, " n"]
-    feasible: Float[Array, " n"]
-    distance: Float[Array, " n"]
-    weight: Float[Array, " n"]
-    live: Float[Array, " n"]
+    var_pan: Float[Array, "*k n"]
+    var_tilt: Float[Array, "*k n"]
+    var_sin_pan: Float[Array, "*k n"]
+    var_tan_tilt: Float[Array, "*k n"]
+    zoom: Float[Array, "*k n"]
+    face_px: Float[Array, "*k n"]
+    feasible: Float[Array, "*k n"]
+    distance: Float[Array, "*k n"]
+    weight: Float[Array, "*k n"]
+    live: Float[Array, "*k n"]
 
-    def per_point(self, objective: str) -> Float[Array, " n"]:
+    def per_point(self, objective: str) -> Float[Array, "*k n"]:
         """The objective's per-point quantity: ``var(pan) + var(tilt)`` or the face pixels."""
         if objective == "variance":
             return self.var_pan + self.var_tilt

@@ -9,6 +9,8 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
+import jax
+import jax.numpy as jnp
 import matplotlib.pyplot as plt
 import numpy as np
 
@@ -203,11 +205,12 @@ def cameras_figure(grid: FloorGrid, rig: Rig, result, path: Path) -> None:
     k = result.k
     per = [grid.to_map(np.where(np.asarray(fv.weight[i]) > 0, np.asarray(pick(_camera(fv, i))), np.nan))
            for i in range(k)]
-    best, weight, which = (np.asarray(a) for a in best_camera(fv, objective))
+    arrays = jax.tree.map(jnp.asarray, fv)
+    best, weight, which = (np.asarray(a) for a in best_camera(arrays, objective))
     scale = (lambda v: np.log10(v)) if objective == "variance" else (lambda v: v)
     best_map = grid.to_map(np.where(weight > 0, scale(best), np.nan))
     which_map = grid.to_map(which.astype(float))
-    ok_map = grid.to_map(np.asarray(framed(rig, fv)).astype(float))
+    ok_map = grid.to_map(np.asarray(framed(rig, arrays)).astype(float))
     finite = np.concatenate([m[np.isfinite(m)] for m in per + [best_map]])
     lo, hi = np.percentile(finite, [1, 99]) if finite.size else (0.0, 1.0)
     panels = [(f"camera {i + 1}", m) for i, m in enumerate(per)] + [("best camera", best_map)]
@@ -252,8 +255,6 @@ def cameras_figure(grid: FloorGrid, rig: Rig, result, path: Path) -> None:
 
 def _camera(fv: FloorValues, i: int) -> FloorValues:
     """Camera ``i``'s per-point values of stacked :class:`~optimise.FloorValues` (NumPy)."""
-    import jax
-
     return jax.tree.map(lambda a: np.asarray(a)[i], fv)
 
 
