@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import time
@@ -93,14 +94,18 @@ def run(args: argparse.Namespace) -> int:
     cache = enable_cache(args)
     out = Path(args.out)
     rooms_dir = out / "rooms"
-    rooms_dir.mkdir(parents=True, exist_ok=True)
     results = finished(rooms_dir, specs)
     todo = [s for s in specs if s.name not in results]
     workers = args.workers or max(1, min(os.cpu_count() or 1, len(todo)))
     cluster = args.scheduler or f"embedded local cluster, {workers} worker process{'es' if workers > 1 else ''}"
-    print(f"{len(specs)} rooms: {len(results)} done before (kept), {len(todo)} to run on {cluster}")
 
-    with tqdm(total=len(todo), desc="plan", unit="room") as bar:
+    with contextlib.ExitStack() as stack:
+        # the cluster first: an unreachable scheduler is bad input, found before anything is written
+        client = stack.enter_context(dask_client(workers, args.scheduler)) if todo else None
+        rooms_dir.mkdir(parents=True, exist_ok=True)
+        print(f"{len(specs)} rooms: {len(results)} done before (kept), {len(todo)} to run on {cluster}")
+        bar = stack.enter_context(tqdm(total=len(todo), desc="plan", unit="room"))
+
         def done(spec, result) -> None:
             write_json(rooms_dir / f"{spec.name}.json", result)
             results[spec.name] = result
@@ -112,8 +117,7 @@ def run(args: argparse.Namespace) -> int:
 
         try:
             if todo:
-                with dask_client(workers, args.scheduler) as client:
-                    run_rooms(client, todo, cache, done)
+                run_rooms(client, todo, cache, done)
         except Interrupted as exc:
             exc.during = (f"after {len(results)} of {len(specs)} rooms (their results are in {rooms_dir}: run "
                           "again to resume)")
