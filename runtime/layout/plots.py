@@ -233,9 +233,9 @@ def cameras_figure(grid: FloorGrid, rig: Rig, result, path: Path) -> None:
             ax.annotate(str(i + 1), (xs[i], ys[i]), xytext=(7, 7), textcoords="offset points", color="k",
                         fontsize=9, fontweight="bold", annotation_clip=False)
         if n == k:
-            if k > 1:
-                ax.contour(grid.xs, grid.ys, np.nan_to_num(which_map, nan=-1.0), levels=np.arange(k) + 0.5,
-                           colors="k", linewidths=1.2)
+            for i in range(k if k > 1 else 0):  # each camera's region outlined: one line where two meet
+                ax.contour(grid.xs, grid.ys, (which_map == i).astype(float), levels=[0.5], colors="k",
+                           linewidths=1.2)
             if np.nanmax(ok_map) > 0 and np.nanmin(ok_map) < 1:
                 ax.contour(grid.xs, grid.ys, np.nan_to_num(ok_map, nan=0.0), levels=[0.5], colors="r", linewidths=2)
         ax.set_aspect("equal")
