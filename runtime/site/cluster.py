@@ -51,9 +51,11 @@ def run_rooms(client, specs: Sequence[RoomSpec], cache_dir: str | None,
     futures = {client.submit(plan_room, spec, cache_dir, key=f"plan-room-{spec.name}-{spec.fingerprint}",
                              pure=False): spec for spec in specs}
     for future in as_completed(futures):
-        spec = futures[future]
+        spec = futures.pop(future)
         try:
             result = future.result()
+            # let go of it: a finished room whose result sits on a worker that dies later is not recomputed
+            future.release()
         except Exception as exc:  # KilledWorker, CommClosedError, CancelledError: the room failed, not the site
             first = str(exc).splitlines()[0] if str(exc) else ""
             result = {"name": spec.name, "fingerprint": spec.fingerprint, "status": "failed",
