@@ -1,4 +1,5 @@
-"""Reading files from disk (rigs, scenarios, PTZ profiles, observations): the one place they are read and parsed.
+"""Reading files from disk (rigs, scenarios, PTZ profiles, observations): the one place they are read and parsed;
+and the one place a rig file is written back (its ``[[zones]]``, :func:`write_zones`).
 
 Every such file is a regular file of at most :data:`MAX_FILE_BYTES`, in UTF-8; anything else
 (a directory, a device, UTF-16, random bytes) is one line naming the file and what was
@@ -9,12 +10,13 @@ from __future__ import annotations
 
 import codecs
 import json
+import os
 import stat
 import tomllib
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from omnijax.config import ConfigError, Rig, parse_rig
+from omnijax.config import ConfigError, Rig, Zone, parse_rig
 from omnijax.detection import polar_range
 
 if TYPE_CHECKING:
@@ -137,6 +139,14 @@ def build_rig(data: dict, source: str, read_text=None) -> Rig:
     return rig
 
 
+def scenario_rig_path(path: str | Path) -> Path:
+    """The rig file a scenario file names (relative to it)."""
+    from omnijax.world import read_scenario_header
+
+    path = Path(path)
+    return path.parent / read_scenario_header(read_toml(path, "scenario file"), source=str(path)).rig
+
+
 def load_scenario(path: str | Path, rig_overrides: dict[str, dict] | None = None) -> tuple[Rig, Scenario]:
     """Load and validate a scenario file and the rig file it names (relative to the scenario).
 
@@ -152,3 +162,34 @@ def load_scenario(path: str | Path, rig_overrides: dict[str, dict] | None = None
         raise ConfigError(f"{path}: rig: no such rig file {str(rig_path)!r}")
     rig = load_rig(rig_path, rig_overrides)
     return rig, parse_scenario(data, rig, source=str(path))
+
+
+def write_zones(path: str | Path, zones: tuple[Zone, ...]) -> None:
+    """Replace the ``[[zones]]`` of the rig file ``path`` with ``zones``, keeping everything else as it was
+    (comments too: tomlkit). Atomic: the new text goes to a temporary file beside it, is loaded as a rig
+    (a file that would not load is never written), then renamed over it."""
+    import tomlkit
+
+    path = Path(path)
+    doc = tomlkit.parse(read_text(path))
+    if "zones" in doc:
+        del doc["zones"]
+    if zones:
+        tables = tomlkit.aot()
+        for z in zones:
+            t = tomlkit.table()
+            t["kind"] = z.kind
+            points = tomlkit.array()
+            points.extend([[round(x, 1), round(y, 1)] for x, y in z.points])
+            t["points"] = points
+            if z.name is not None:
+                t["name"] = z.name
+            tables.append(t)
+        doc["zones"] = tables
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(tomlkit.dumps(doc))
+        load_rig(tmp)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)

@@ -36,3 +36,10 @@ from ._schema import (
     validate as validate,
     within as within,
 )
+from ._zones import (
+    ZONE_KINDS as ZONE_KINDS,
+    Zone as Zone,
+    parse_zones as parse_zones,
+    polygon_contains as polygon_contains,
+    zone_mask as zone_mask,
+)

@@ -41,6 +41,7 @@ from ._schema import (
     validate,
     within,
 )
+from ._zones import MAX_ZONES, Zone, ZoneSection, zones_in_image
 
 # --------------------------------------------------------------------------------------
 # Kernel-side types
@@ -262,6 +263,9 @@ class Rig(eqx.Module):
         p = self.more_ptzs[i - 1]
         return eqx.tree_at(lambda r: (r.foveal, r.sigmas.D_c, r.sigmas.H_f, r.sigmas.theta_c), one,
                            (p.foveal, p.sigma_D_c, p.sigma_H_f, p.sigma_theta_c))
+    #: ``[[zones]]`` of the omni image (:mod:`omnijax.config._zones`): static, read when the detector
+    #: and the target selector are built, never traced.
+    zones: tuple[Zone, ...] = eqx.field(static=True, default=())
 
     def input_mean(self, r_f, theta_f) -> Float[Array, "*b 9"]:
         """The input vector x of the pointing geometry, in :data:`INPUT_NAMES` order.
@@ -530,6 +534,8 @@ class RigFile(Section):
     zoom: ZoomSection
     room: RoomSection
     layout: LayoutSection = Field(default_factory=LayoutSection)
+    zones: Annotated[list[ZoneSection], Len(0, MAX_ZONES)] = Field(
+        default_factory=list, description="[[zones]] of the omni image (optional)")
 
     @model_validator(mode="after")
     def _geometry(self, info):  # info: pydantic.ValidationInfo (a Protocol the jaxtyping hook cannot check)
@@ -750,4 +756,5 @@ def parse_rig(
         omni=omni, foveal=foveal, person=person, sigmas=sigmas, detection=detection, room=room,
         p_contain=_a(f.zoom.p_contain), layout=_layout_search(f, source), zoom_rule=f.zoom.rule,
         more_ptzs=more, ptz_profiles=tuple(g.foveal.profile for g in files),
+        zones=zones_in_image(f.zones, omni.image_size, source),
     )

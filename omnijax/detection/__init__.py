@@ -37,6 +37,7 @@ from ._detector import (
     line_change as line_change,
     locate_feet as locate_feet,
     sector_mask as sector_mask,
+    with_zones as with_zones,
 )
 from ._foot import (
     FootSigmaTable as FootSigmaTable,

@@ -92,15 +92,17 @@ def build_thresholds(rig: Rig, polar: PolarIndex, key: PRNGKeyArray, dof_per_sam
     det = rig.detection
     x_f, x_m, c_min = float(det.x_f), float(det.x_m), float(det.c_min)
     dof = dof_per_sample * np.asarray(polar.samples)
-    lower = chi2.ppf(1 - x_f, dof)
+    seen = dof > 0  # a line wholly inside ignore zones has no samples: it never fires
+    lower = np.where(seen, chi2.ppf(1 - x_f, np.maximum(dof, 1)), np.inf)
     k_line = np.asarray(jax.jit(person_line_lengths, static_argnums=3)(rig, polar, key, n_sim))
-    distinct, inverse = np.unique(dof, return_inverse=True)
+    distinct, inverse = np.unique(dof[seen], return_inverse=True)
     frac = distinct / (dof_per_sample * polar.n_r)  # share of a line's samples that are distinct
-    upper = np.array([upper_threshold(d, k_line * f, c_min, x_m) for d, f in zip(distinct, frac)])[inverse]
-    feasible = bool(np.all(upper >= lower))
+    upper = np.full_like(lower, np.inf)
+    upper[seen] = np.array([upper_threshold(d, k_line * f, c_min, x_m) for d, f in zip(distinct, frac)])[inverse]
+    feasible = bool(np.all(upper[seen] >= lower[seen]))
     upper = np.maximum(upper, lower)
     window = chi2.ppf(1 - x_f, dof_per_sample * np.asarray(polar.window_px))
-    seed_fa = float(np.sum(chi2.sf(upper, dof)))
+    seed_fa = float(np.sum(chi2.sf(upper[seen], dof[seen])))
     return Thresholds(lower=jnp.asarray(lower), upper=jnp.asarray(upper), window=jnp.asarray(window),
                       feasible=jnp.asarray(feasible), seed_false_alarm=jnp.asarray(seed_fa))
 
@@ -162,6 +164,7 @@ def window_profile(frame: UInt8[Array, "H W 3"], bg_mean: Float[Array, "H W 3"],
     xi, yi = jnp.round(x).astype(jnp.int32), jnp.round(y).astype(jnp.int32)
     ok = polar.window_ok & (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
     flat = jnp.where(ok, yi * W + xi, 0)
+    ok = ok & ~polar.ignore.reshape(-1)[flat]  # ignore zones (omnijax.config)
     cur = frame.reshape(-1, 3)[flat].astype(jnp.float32)
     d2 = MEASURES[measure][0](cur, bg_mean.reshape(-1, 3)[flat], bg_var.reshape(-1)[flat], sigma.reshape(-1)[flat])
     return jnp.where(ok, d2, 0.0).sum(-1), ok.sum(-1).astype(jnp.float32)

@@ -10,7 +10,10 @@ Built once per rig (NumPy-free, but not traced: sizes come out of the geometry):
 - psi2 windows: at each radius, the pixels across the line over the width of a
   person there, as sensor offsets to rotate onto any sector's centre line;
 - foot hypotheses: for each inner end ``i`` of a person along a line, the index just
-  past its outer end, and the image radius of its axis foot (what eq 1 turns into R_p).
+  past its outer end, and the image radius of its axis foot (what eq 1 turns into R_p);
+- the rig's *ignore* zones (``[[zones]]``, :mod:`omnijax.config`): line samples inside them are
+  left out like repeats (``line_ok``), so that nothing is detected there and a line's
+  chi-square counts only the samples left; psi2 windows leave out their pixels (``ignore``).
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from ..config import ConfigError, Rig
+from ..config import ConfigError, Rig, zone_mask
 from ..geometry import floor_radius, person_image_extent, point_image_radius
 
 #: Fewest pixels of radius the polar sampling needs (a person's profile along a line).
@@ -46,6 +49,7 @@ class PolarIndex(eqx.Module):
     hyp_r_f: Float[Array, " R"]
     hyp_dout_dH: Float[Array, " R"]
     hyp_width: Float[Array, " R"]
+    ignore: Bool[Array, "height width"]
     image_size: tuple[int, int] = eqx.field(static=True)
 
     @property
@@ -129,7 +133,8 @@ def build_polar_index(rig: Rig) -> PolarIndex:
     flat = np.where(inside, yi * W_img + xi, 0)
     repeat = np.zeros_like(inside)
     repeat[:, 1:] = flat[:, 1:] == flat[:, :-1]
-    line_ok = inside & ~repeat
+    ignore = zone_mask(rig.zones, "ignore", (W_img, H_img))
+    line_ok = inside & ~repeat & ~ignore.reshape(-1)[flat]
 
     rho = float(body_radius(rig))
     width = np.maximum(3, 2 * np.floor(radii * np.arctan(rho / (R_floor + rho)))) + 1  # odd, >= 3
@@ -149,5 +154,5 @@ def build_polar_index(rig: Rig) -> PolarIndex:
         window_px=jnp.asarray(width),
         hyp_out=jnp.asarray(np.minimum(hyp_out, n_r), dtype=jnp.int32), hyp_ok=jnp.asarray(hyp_ok),
         hyp_r_f=jnp.asarray(hyp_r_f), hyp_dout_dH=jnp.asarray(dout_dH),
-        hyp_width=jnp.asarray(hyp_width), image_size=(W_img, H_img),
+        hyp_width=jnp.asarray(hyp_width), ignore=jnp.asarray(ignore), image_size=(W_img, H_img),
     )

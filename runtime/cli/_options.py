@@ -13,6 +13,7 @@ Nothing here imports JAX: building the parser stays quick.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 
 from runtime.errors import UsageError
@@ -139,6 +140,13 @@ def add_loop_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-video", action="store_true", help="do not draw or write the annotated video")
     parser.add_argument("--record", action="store_true",
                         help="also write the omni frames as processed to DIR/omni.avi (to replay with `omnijax run`)")
+    parser.add_argument("--serve", metavar="HOST:PORT",
+                        help="serve the operator's console (live view, controls, zones, events, calibration) on "
+                             "HOST:PORT, e.g. 127.0.0.1:8080 (port 0: any free one); prints its address with the "
+                             "token that changes need (docs/console.md)")
+    parser.add_argument("--mqtt", metavar="URL",
+                        help="also publish the events (person appeared, left, face captured) to an MQTT broker: "
+                             "mqtt://[USER:PASSWORD@]HOST[:PORT][/PREFIX] (docs/console.md)")
     add_cache_options(parser)
 
 
@@ -164,3 +172,29 @@ def parse_faults(text: str, ptz_unplug: bool = True):
     if plan.ptz_unplug and not ptz_unplug:
         raise UsageError("--faults: ptz-unplug needs the emulated PTZ of `omnijax demo` (unplug a real one by hand)")
     return plan
+
+
+@contextlib.contextmanager
+def console_and_events(args, rig_path, profile_spec: str | None = None):
+    """``--serve`` and ``--mqtt``: the operator's console (bound now, so that a bad address or a port in use
+    is one line before any work; serving until the block ends) and the MQTT publisher (connecting in the
+    background). Yields ``(console or None, publisher or None)``."""
+    from runtime.events import MqttPublisher, parse_mqtt_url
+
+    if args.mqtt:
+        try:
+            parse_mqtt_url(args.mqtt)
+        except ValueError as exc:
+            raise UsageError(f"--mqtt: {exc}") from None
+    console = None
+    if args.serve:
+        from runtime.console import Console
+
+        console = Console(args.serve, rig_path, profile_spec)
+    with console if console is not None else contextlib.nullcontext():
+        mqtt = MqttPublisher(args.mqtt).start() if args.mqtt else None
+        try:
+            yield console, mqtt
+        finally:
+            if mqtt is not None:
+                mqtt.close()

@@ -35,6 +35,14 @@ that frame or the drawing thread had to skip it). Drawing, the video and the log
 run on their own thread: frames it had no time for are skipped, counted and
 listed in summary.json (off_path), never waited for.
 
+DIR/events.jsonl has the events (person appeared, face captured with the PTZ's
+image in DIR/faces/, person left); --mqtt URL publishes them to a broker.
+--serve HOST:PORT serves the operator's console while the demo runs: the live
+view, the status, the controls (choose the target, point the PTZ, pause, home),
+zones (saved into the scenario's rig file), events and a calibration assistant
+(docs/console.md); it prints "serving http://HOST:PORT/?token=TOKEN" on stderr at
+start, and only requests with that token change anything.
+
 Ctrl-C or SIGTERM during start-up (building the world, learning the background,
 compiling: 20-30 s) stops it at once: nothing is written, the emulator is stopped,
 exit code 130. Once the loop runs, they end it and everything is written.
@@ -110,7 +118,14 @@ class FovealInset:
 
 
 def run(args: argparse.Namespace) -> int:
-    from runtime.cli._options import MAX_FRAMES, load_ptz_profile, loop_config, parse_faults, scenario_file
+    from runtime.cli._options import (
+        MAX_FRAMES,
+        console_and_events,
+        load_ptz_profile,
+        loop_config,
+        parse_faults,
+        scenario_file,
+    )
     from runtime.errors import UsageError, interrupted_during
 
     config = loop_config(args)
@@ -133,64 +148,66 @@ def run(args: argparse.Namespace) -> int:
     scenario = scenario_file(args.scenario)
 
     from omnijax.world import build_world
-    from runtime.files import load_scenario
+    from runtime.files import load_scenario, scenario_rig_path
     from runtime.ptz import PtzError, make_driver
     from runtime.ptz.child import EmulatorProcess
+    from runtime.ptz.profile import DEFAULT_PROFILES
     from runtime.ptz.transports import EMULATED
     from runtime.realtime.session import run_session
     from runtime.realtime.sources import FaultySource, SyntheticSource
     from runtime.validation.scoring import DemoScorer
 
     rig, sc = load_scenario(scenario)
-    print(f"omnijax demo: building the world '{sc.name}' ({args.frames} frames at {sc.fps:g} fps) ...",
-          file=sys.stderr, flush=True)
-    with interrupted_during("during start-up"):
-        try:
-            world = build_world(rig, sc, args.seed, n_frames=args.frames)
-        except ValueError as exc:
-            raise UsageError(f"{scenario}: {exc}") from None
-        synthetic = SyntheticSource(world)
-        source = FaultySource(synthetic, plan) if not plan.empty else synthetic
-        scorer = DemoScorer(world, synthetic)
-    profile = load_ptz_profile(None, EMULATED[args.protocol])
-    # the emulator is stopped when this block is left in any way, and stops by itself if this process dies
-    with interrupted_during("during start-up"), EmulatorProcess(args.protocol) as emulator:
-        driver = make_driver(emulator.url, profile)
-        try:
-            driver.connect(timeout=30)  # ONVIF: the first connect parses the WSDLs (seconds on a busy machine)
-        except PtzError as exc:
-            raise RuntimeError(f"the PTZ emulator did not answer: {exc}") from None
+    with console_and_events(args, scenario_rig_path(scenario), DEFAULT_PROFILES[EMULATED[args.protocol]]) as (
+            console, mqtt):
+        print(f"omnijax demo: building the world '{sc.name}' ({args.frames} frames at {sc.fps:g} fps) ...",
+              file=sys.stderr, flush=True)
+        with interrupted_during("during start-up"):
+            try:
+                world = build_world(rig, sc, args.seed, n_frames=args.frames)
+            except ValueError as exc:
+                raise UsageError(f"{scenario}: {exc}") from None
+            synthetic = SyntheticSource(world)
+            source = FaultySource(synthetic, plan) if not plan.empty else synthetic
+            scorer = DemoScorer(world, synthetic)
+        profile = load_ptz_profile(None, EMULATED[args.protocol])
+        # the emulator is stopped when this block is left in any way, and stops by itself if this process dies
+        with interrupted_during("during start-up"), EmulatorProcess(args.protocol) as emulator:
+            driver = make_driver(emulator.url, profile)
+            try:
+                driver.connect(timeout=30)  # ONVIF: the first connect parses the WSDLs (seconds on a busy machine)
+            except PtzError as exc:
+                raise RuntimeError(f"the PTZ emulator did not answer: {exc}") from None
 
-        unplugs = dict(plan.ptz_unplug)
+            unplugs = dict(plan.ptz_unplug)
 
-        def unplug(record, frame, *_):
-            due = [k for k in unplugs if k <= frame.index]  # the frame itself may have been dropped
-            if due:
-                seconds = unplugs.pop(min(due))
-                emulator.unplug(seconds)
-                return {"fault": f"PTZ port unplugged for {seconds:g} s"}
-            return {}
+            def unplug(record, frame, *_):
+                due = [k for k in unplugs if k <= frame.index]  # the frame itself may have been dropped
+                if due:
+                    seconds = unplugs.pop(min(due))
+                    emulator.unplug(seconds)
+                    return {"fault": f"PTZ port unplugged for {seconds:g} s"}
+                return {}
 
-        def finish(summary):
-            summary.update(scorer.summary(float(rig.p_contain), args.zoom_rule))
-            summary["scenario"] = {"file": str(scenario), "name": sc.name, "frames": args.frames,
-                                   "seed": world.seed, "fps": sc.fps, "pace": args.pace}
-            summary["faults"]["injected"] = plan.describe()
-            summary["faults"]["ptz_unplugged"] = emulator.unplugs
-            summary["emulator"] = emulator.state()
+            def finish(summary):
+                summary.update(scorer.summary(float(rig.p_contain), args.zoom_rule))
+                summary["scenario"] = {"file": str(scenario), "name": sc.name, "frames": args.frames,
+                                       "seed": world.seed, "fps": sc.fps, "pace": args.pace}
+                summary["faults"]["injected"] = plan.describe()
+                summary["faults"]["ptz_unplugged"] = emulator.unplugs
+                summary["emulator"] = emulator.state()
 
-        print(f"omnijax demo: PTZ emulator ({profile.name}) on {emulator.pty}; learning the background, "
-              "compiling ...", file=sys.stderr, flush=True)
-        try:
-            summary = run_session(
-                rig, source, Path(args.out), driver=driver, profile=profile, config=config,
-                paced=args.pace == "live", background_frames=30, background_step=args.background_step,
-                video=not args.no_video, record=args.record, title=f"OMNI 1  {sc.name}",
-                foveal=FovealInset(world, emulator, args.inset_every), hooks=(scorer,), control_hooks=(unplug,),
-                finish=finish,
-                screenshot_at=args.screenshot)
-        finally:
-            driver.disconnect()
+            print(f"omnijax demo: PTZ emulator ({profile.name}) on {emulator.pty}; learning the background, "
+                  "compiling ...", file=sys.stderr, flush=True)
+            try:
+                summary = run_session(
+                    rig, source, Path(args.out), driver=driver, profile=profile, config=config,
+                    paced=args.pace == "live", background_frames=30, background_step=args.background_step,
+                    video=not args.no_video, record=args.record, title=f"OMNI 1  {sc.name}",
+                    foveal=FovealInset(world, emulator, args.inset_every), hooks=(scorer,), control_hooks=(unplug,),
+                    finish=finish, screenshot_at=args.screenshot, console=console, mqtt=mqtt)
+            finally:
+                driver.disconnect()
     _report(summary, args.out)
     return 0
 

@@ -4,6 +4,7 @@ steering a PTZ."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 from pathlib import Path
 
@@ -29,8 +30,15 @@ onvif://[USER:PASSWORD@]HOST[:PORT] (ONVIF; the password is never printed or
 logged); without it commands are computed and logged only.
 Ctrl-C or SIGTERM: the PTZ goes home, the summary is written, nothing is lost.
 
-Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line per frame)
-and DIR/annotated.mp4 (the operator's view; --no-video to skip it).
+Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line per frame),
+DIR/events.jsonl (person appeared, face captured, left; faces in DIR/faces/ with
+--ptz-video) and DIR/annotated.mp4 (the operator's view; --no-video to skip it).
+
+--serve HOST:PORT serves the operator's console: the live view, the status, the
+controls (choose the target, point the PTZ, pause, home), zones saved into the
+--config file, events and a calibration assistant (docs/console.md); it prints
+"serving http://HOST:PORT/?token=TOKEN" on stderr at start, and only requests
+with that token change anything. --mqtt URL publishes the events to a broker.
 """
 
 
@@ -52,6 +60,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="live: frames at the source's rate, late ones dropped; all: every frame as fast as "
                         "possible (default: live for cameras and videos, all for image folders)")
     p.add_argument("--fps", type=finite_float, metavar="F", help="frame rate of an image folder")
+    p.add_argument("--ptz-video", metavar="SOURCE",
+                   help="the PTZ camera's own video (stream URL, camera index or file): shown in the operator's view "
+                        "and the console, and saved as the face when one is captured (default: none)")
     p.add_argument("--background-frames", type=int, metavar="N",
                    help="frames to learn the background from (default: [detection] background_frames)")
     p.add_argument("--background-step", type=int, default=1, metavar="K",
@@ -62,7 +73,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from runtime.cli._options import load_ptz_profile, loop_config, parse_faults
+    from runtime.cli._options import console_and_events, load_ptz_profile, loop_config, parse_faults
     from runtime.errors import UsageError
 
     config = loop_config(args)
@@ -76,43 +87,22 @@ def run(args: argparse.Namespace) -> int:
 
     from runtime.files import load_rig
     from runtime.frames import FolderSource, SourceError, open_source
-    from runtime.ptz import PtzError, make_driver
-    from runtime.realtime.session import run_session
+    from runtime.ptz.profile import DEFAULT_PROFILES
+    from runtime.ptz.transports import required_protocol
     from runtime.realtime.sources import FaultySource
 
     rig = load_rig(args.config)
-    from runtime.ptz.onvif import redact
-    from runtime.ptz.transports import required_protocol
-
     profile = load_ptz_profile(args.ptz_profile, required_protocol(args.ptz) if args.ptz else None)
-    try:
-        source = open_source(args.source, args.fps)
-    except SourceError as exc:
-        raise UsageError(str(exc)) from None
-    if not plan.empty:
-        source = FaultySource(source, plan)
-    pace = args.pace or ("all" if isinstance(source, FolderSource) and args.fps is None else "live")
-    driver = None
-    if args.ptz:
+    with console_and_events(args, Path(args.config), args.ptz_profile or DEFAULT_PROFILES[profile.protocol]) as (
+            console, mqtt):
         try:
-            driver = make_driver(args.ptz, profile)
-            driver.connect(timeout=30 if args.ptz.lower().startswith("onvif://") else 5)  # ONVIF: WSDLs parsed first
-        except PtzError as exc:
-            source.close()
-            raise UsageError(f"--ptz: {exc}") from None
-    try:
-        summary = run_session(rig, source, Path(args.out), driver=driver, profile=profile, config=config,
-                              paced=pace == "live", background_frames=args.background_frames,
-                              background_step=args.background_step,
-                              video=not args.no_video, record=args.record, title=f"OMNI  {Path(str(args.source)).name}",
-                              extra={"config_file": str(args.config),
-                                     "ptz_url": redact(args.ptz) if args.ptz else None, "pace": pace,
-                                     "faults_injected": plan.describe()})
-    except SourceError as exc:
-        raise UsageError(str(exc)) from None
-    finally:
-        if driver is not None:
-            driver.disconnect()
+            source = open_source(args.source, args.fps)
+        except SourceError as exc:
+            raise UsageError(str(exc)) from None
+        if not plan.empty:
+            source = FaultySource(source, plan)
+        pace = args.pace or ("all" if isinstance(source, FolderSource) and args.fps is None else "live")
+        summary = _run(args, rig, source, profile, config, plan, pace, console, mqtt)
     lat, p = summary["latency_ms"], summary["ptz"]
     print(f"{summary['frames']} frames at {summary['fps']:.1f} fps ({summary['stop_reason']}); latency p50 "
           f"{lat['p50'] or float('nan'):.2f} ms, p99 {lat['p99'] or float('nan'):.2f} ms; "
@@ -121,3 +111,45 @@ def run(args: argparse.Namespace) -> int:
           + (f"stream {summary['stream']['reconnects']} reconnects; " if "stream" in summary else "")
           + f"wrote {args.out}", file=sys.stdout)
     return 0
+
+
+def _run(args, rig, source, profile, config, plan, pace, console, mqtt) -> dict:
+    """Connect the PTZ and run the session (the console, if any, serving meanwhile); its summary."""
+    from runtime.errors import UsageError
+    from runtime.frames import SourceError, open_source
+    from runtime.ptz import PtzError, make_driver
+    from runtime.ptz.onvif import redact
+    from runtime.realtime.session import run_session
+    from runtime.realtime.sources import LatestImage
+
+    driver = None
+    if args.ptz:
+        try:
+            driver = make_driver(args.ptz, profile)
+            driver.connect(timeout=30 if args.ptz.lower().startswith("onvif://") else 5)  # ONVIF: WSDLs parsed first
+        except PtzError as exc:
+            source.close()
+            raise UsageError(f"--ptz: {exc}") from None
+    ptz_view = contextlib.nullcontext()
+    if args.ptz_video:
+        try:
+            ptz_view = LatestImage(open_source(args.ptz_video))
+        except SourceError as exc:
+            source.close()
+            if driver is not None:
+                driver.disconnect()
+            raise UsageError(f"--ptz-video: {exc}") from None
+    try:
+        with ptz_view as foveal:
+            return run_session(rig, source, Path(args.out), driver=driver, profile=profile, config=config,
+                               paced=pace == "live", background_frames=args.background_frames,
+                               background_step=args.background_step, video=not args.no_video, record=args.record,
+                               title=f"OMNI  {Path(str(args.source)).name}", foveal=foveal,
+                               extra={"config_file": str(args.config),
+                                      "ptz_url": redact(args.ptz) if args.ptz else None, "pace": pace,
+                                      "faults_injected": plan.describe()}, console=console, mqtt=mqtt)
+    except SourceError as exc:
+        raise UsageError(str(exc)) from None
+    finally:
+        if driver is not None:
+            driver.disconnect()

@@ -15,6 +15,9 @@ The control thread does only this, per frame (each stage timed):
 5. ``send``: the PTZ command through the driver, unless it falls in the dead-zone;
 6. ``adapt``: the background update dispatched (it runs while the loop waits for the next frame).
 
+The operator's requests (the console: a chosen target, a pause, a manual pointing, new zones) are read
+once a frame from :class:`~runtime.realtime.operator.Operator` without waiting (``operator``).
+
 Everything else runs on another thread fed by a bounded queue that never holds up this one
 (:class:`~runtime.realtime.drawing.OffPath`): the hooks (``draw``: the annotated frame with the
 foveal inset and its encoding, the demo's scoring) and the log line; what it had to skip is
@@ -47,9 +50,11 @@ from omnijax.zoom import ZOOM_RULES
 from runtime.realtime.config import LoopConfig
 from runtime.realtime.control import Slew, control_step, pan_tilt_slew_s, perceive
 from runtime.realtime.drawing import OffPath
+from runtime.realtime.operator import Operator, OperatorState
 from runtime.realtime.sources import Capture, Frame
 from runtime.realtime.targeting import TargetSelector, can_frame, outside_dead_zone, trust_rule
 from runtime.realtime.tracker import Tracker
+from runtime.realtime.zones import priority_test
 
 #: Timed stages: the control thread's, then the drawing thread's (``draw``: the hooks; ``log``).
 STAGES = ("capture", "control", "track", "aim", "send", "adapt", "draw", "log")
@@ -66,9 +71,9 @@ def update_background(detector: Detector, bg, frame, theta_map, dets, rate):
 
 @dataclass
 class Command:
-    """What was (or would have been) sent for a frame."""
+    """What was (or would have been) sent for a frame (``track`` ``None``: the operator's manual pointing)."""
 
-    track: int
+    track: int | None
     pan: float
     tilt: float
     zoom: float
@@ -133,13 +138,16 @@ class RealTimeLoop:
     (:meth:`status`); it returns extra log fields.
     ``on_control(record, frame)``: called on the control thread after the send (fault injection
     that must happen at its frame), returning extra log fields; keep it cheap.
-    ``driver`` may be ``None`` (no PTZ: commands are computed and logged only).
+    ``driver`` may be ``None`` (no PTZ: commands are computed and logged only). ``operator``: the
+    console's requests (:class:`~runtime.realtime.operator.Operator`), read once a frame; ``None``: none.
     """
 
     def __init__(self, rig: Rig, detector: Detector, background, capture: Capture, driver, profile,
                  config: LoopConfig, log_path: Path, on_frame: Callable | None = None,
-                 on_control: Callable | None = None):
+                 on_control: Callable | None = None, operator: Operator | None = None):
         self.rig, self.detector, self.capture = rig, detector, capture
+        self.operator = operator
+        self.zones, self.zones_version = rig.zones, 0
         self.driver, self.profile, self.cfg = driver, profile, config
         self.bg = background
         self.lines = line_background(detector, background)
@@ -149,11 +157,13 @@ class RealTimeLoop:
         #: tracker slots in the compiled step; beyond them the tracks missing longest are dropped (counted)
         self.n_slots = 4 * detector.max_people
         self.selector = TargetSelector(config.target, config.dwell_s, trust_rule(config))
+        self.selector.priority = priority_test(rig)
         self.timings = Timings()
         self.on_frame, self.on_control = on_frame, on_control
         self.log_path = log_path
         self.counts = {"frames": 0, "broken": 0, "wrong_size": 0, "commands_sent": 0, "dead_zone": 0,
-                       "no_target": 0, "held_untrusted": 0, "held_unframeable": 0,
+                       "no_target": 0, "held_untrusted": 0, "held_unframeable": 0, "held_paused": 0,
+                       "operator_frames": 0,
                        "invalid_geometry": 0, "deadline_overruns": 0, "tracks_over_slots": 0}
         self.sent: tuple[float, float, float] | None = None
         self.sent_at: float | None = None
@@ -165,6 +175,7 @@ class RealTimeLoop:
         self._pending: dict[int, float] = {}  # driver sequence number -> frame available time
         self.stop_reason = "source ended"
         self.off_path: OffPath | None = None
+        self._framable: set[int] = set()
         W, H = rig.omni.image_size
         self.shape = (H, W, 3)
         self._theta_map = jnp.asarray(rig.omni.to_polar(*np.meshgrid(np.arange(W), np.arange(H)))[1], jnp.float32)
@@ -269,6 +280,13 @@ class RealTimeLoop:
             return
         self.counts["frames"] += 1
         t = time.monotonic()
+        op = None
+        if self.operator is not None:
+            swap = self.operator.take_zones()
+            if swap is not None:  # rebuilt off this thread; same shapes, nothing recompiles
+                self.detector, self.selector.priority = swap.detector, swap.priority
+                self.zones, self.zones_version = swap.zones, swap.version
+            op = self.operator.state
         tracker = self.tracker
         if len(tracker.tracks) > self.n_slots:  # many false alarms: keep the tracks seen most recently
             self.counts["tracks_over_slots"] += len(tracker.tracks) - self.n_slots
@@ -286,7 +304,14 @@ class RealTimeLoop:
         confirmed = tracker.confirmed()
         t = self._record("track", t)
         aim_of = {slots[int(i)].id: j for j, (i, ok) in enumerate(zip(c.aim_slot, c.aim_ok)) if ok}
-        command = self._aim(frame, confirmed, c, aim_of)
+        pointing = op.pointing(time.monotonic()) if op is not None else None
+        if pointing is not None:
+            command = self._manual(frame, pointing)
+        else:
+            command = self._aim(frame, confirmed, c, aim_of, op)
+        if op is not None and (pointing is not None or op.paused or op.target is not None):
+            record["operator"] = "point" if pointing is not None else "paused" if op.paused else "target"
+            self.counts["operator_frames"] += 1
         t = self._record("aim", t)
         if command is not None and command.sent:
             self._send(command, frame.stamp)
@@ -320,7 +345,9 @@ class RealTimeLoop:
         """A snapshot of the loop's counters for the drawing thread (taken on the control thread)."""
         st = {"frames": self.counts["frames"], "elapsed": time.monotonic() - self.t_start,
               "counts": dict(self.counts), "capture": dict(self.capture.counts), "captures": self.selector.captures,
-              "driver": None}
+              "driver": None, "held": self.selector.held, "framable": sorted(self._framable),
+              "sent": self.sent, "operator": self.operator.state if self.operator is not None else None,
+              "zones_version": self.zones_version}
         if self.driver is not None:
             st["driver"] = {"connected": self.driver.connected, **self.driver.counters}
         return st
@@ -343,19 +370,37 @@ class RealTimeLoop:
         d_zoom = abs(self.profile.zoom_position(target[2]) - self.profile.zoom_position(self.sent[2])) / z_span
         return self.profile.link.command_latency_s + max(pan_tilt, d_zoom * zp.seconds_full_range)
 
-    def _aim(self, frame: Frame, tracks, c, aim_of: dict[int, int]) -> Command | None:
+    def _manual(self, frame: Frame, pointing: tuple[float, float, float]) -> Command:
+        """The operator's manual pointing as this frame's command (sent when it changes)."""
+        pan, tilt, zoom = pointing
+        return Command(track=None, pan=pan, tilt=tilt, zoom=zoom, zooms=dict.fromkeys(ZOOM_RULES, zoom), sd_pan=0.0,
+                       sd_tilt=0.0, sent=self.sent != pointing or self._sent_track is not None,
+                       t_predicted=frame.stamp)
+
+    def _aim(self, frame: Frame, tracks, c, aim_of: dict[int, int], op: OperatorState | None = None) -> Command | None:
         aims: dict[int, tuple[int, Aim]] = {}
+        self._framable = set()
 
         def framable(track) -> bool:
+            if track.id in aims:
+                return track.id in self._framable
             j = aim_of.get(track.id)
             if j is None:  # not aimed at in the control step (not matched this frame)
                 return False
             aims[track.id] = (j, jax.tree.map(lambda a: a[j], c.aims))
             if not bool(aims[track.id][1].pointing.valid):
                 self.counts["invalid_geometry"] += 1
-            return can_frame(aims[track.id][1], self.cfg.zoom_rule)
+            ok = can_frame(aims[track.id][1], self.cfg.zoom_rule)
+            if ok:
+                self._framable.add(track.id)
+            return ok
 
-        target = self.selector.choose(frame.stamp, tracks, self._settled(frame.stamp), framable)
+        if op is not None:  # the console shows which tracks the operator can pick
+            for tr in tracks:
+                framable(tr)
+        target = self.selector.choose(frame.stamp, tracks, self._settled(frame.stamp), framable,
+                                      manual=op.target if op is not None else None,
+                                      paused=op is not None and op.paused)
         if target is None:
             self.counts["no_target"] += 1
             if self.selector.held is not None:
@@ -426,7 +471,8 @@ class RealTimeLoop:
                           "sd_pan_deg": round(math.degrees(command.sd_pan), 4),
                           "sd_tilt_deg": round(math.degrees(command.sd_tilt), 4), "sent": command.sent,
                           "t_predicted": round(command.t_predicted, 4),
-                          "floor_sd_m": [round(float(v), 4) for v in command.floor_sd]}
+                          "floor_sd_m": (None if command.floor_sd is None
+                                         else [round(float(v), 4) for v in command.floor_sd])}
         return out
 
     def _status(self, elapsed: float) -> None:

@@ -3,9 +3,10 @@
 :func:`run_session` learns the background from the source's first frames, builds the detector,
 starts the capture thread, runs :class:`~runtime.loop.RealTimeLoop` until the source ends, a limit
 is reached or Ctrl-C/SIGTERM arrives, sends the PTZ home, and writes into the output folder
-(staged: nothing half-written) ``summary.json``, ``log.jsonl`` and ``annotated.mp4`` (or ``.avi``
-where OpenCV has no MP4 encoder). :class:`Annotator` draws the operator's view (the paper's
-figure 1) for each processed frame.
+(staged: nothing half-written) ``summary.json``, ``log.jsonl``, ``events.jsonl`` (with ``faces/``) and
+``annotated.mp4`` (or ``.avi`` where OpenCV has no MP4 encoder). :class:`Annotator` draws the operator's
+view (the paper's figure 1) for each processed frame; with a console (``--serve``) the view is drawn
+whatever ``video`` says, and the console's snapshot is taken after it on the drawing thread.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import numpy as np
 from omnijax import Rig, build_detector, learn_background
 from omnijax.detection import polar_range
 from runtime.errors import UsageError, interrupted_during
+from runtime.events import EventLog
 from runtime.frames import Source
 from runtime.output import dumps, staged_output
 from runtime.realtime.config import LoopConfig
@@ -87,6 +89,9 @@ class Annotator:
     sinks: list = field(default_factory=list)
     loop: RealTimeLoop | None = None
     last: np.ndarray | None = None
+    #: the latest frame's annotated omni image and PTZ inset (with its label), apart (the console shows them)
+    omni_view: np.ndarray | None = None
+    inset: tuple[np.ndarray | None, str] = (None, "PTZ")
 
     def __post_init__(self):
         self.r_range = polar_range(self.rig)
@@ -112,7 +117,8 @@ class Annotator:
         lines = [(f"{n / elapsed:5.1f} fps   latency {np.median(lat) if lat.size else float('nan'):5.2f} ms", WHITE),
                  (f"tracks {len(tracks)}   faces captured {status['captures']}", WHITE)]
         if command is not None:
-            lines.append((f"target #{command.track}  pan {math.degrees(command.pan):6.1f}  "
+            who = "manual" if command.track is None else f"target #{command.track}"
+            lines.append((f"{who}  pan {math.degrees(command.pan):6.1f}  "
                           f"tilt {math.degrees(command.tilt):5.1f}", ORANGE))
             lines.append((f"zoom x{command.zoom:4.1f} ({loop.cfg.zoom_rule}, p={float(self.rig.p_contain):.2f})",
                           ORANGE))
@@ -130,6 +136,7 @@ class Annotator:
         lines.append((f"faults: broken {counts['broken']}  size {counts['wrong_size']}  "
                       f"stale {status['capture']['stale']}", RED if faults else GREY))
         clock = f"frame {frame.index:6d}   t {frame.stamp:8.2f} s"
+        self.omni_view, self.inset = img, (inset, inset_label)
         self.last = compose_view(img, inset, self.title, clock, lines, inset_label)
         for sink in self.sinks:
             sink(self.last)
@@ -168,14 +175,16 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
                 paced: bool = True, background_frames: int | None = None, background_step: int = 1,
                 video: bool = True, record: bool = False,
                 title: str = "omnijax", foveal: Callable | None = None, hooks: tuple = (), control_hooks: tuple = (),
-                finish: Callable | None = None, extra: dict | None = None, screenshot_at: int | None = None) -> dict:
+                finish: Callable | None = None, extra: dict | None = None, screenshot_at: int | None = None,
+                console=None, mqtt=None) -> dict:
     """Run the loop on ``source`` and write the outputs to ``out`` (see the module docstring).
 
     ``hooks`` are extra ``on_frame`` hooks (the demo's scorer), run on the drawing thread;
     ``control_hooks`` run on the control thread at their frame (fault injection); ``record`` writes
     the processed omni frames as they came (``omni.avi``, to replay with ``omnijax run``); ``finish(summary)``
     may add to the summary before it is written; ``screenshot_at`` saves that processed frame's
-    view as ``view.png``. Returns the summary.
+    view as ``view.png``; ``console`` (:class:`~runtime.console.Console`) is attached to the loop once it is
+    built, ``mqtt`` (:class:`~runtime.events.MqttPublisher`) gets the events. Returns the summary.
     """
     # the PTZ driver's and the capture's threads get the interpreter within 1 ms (default 5 ms) of a wake-up
     sys.setswitchinterval(0.001)
@@ -186,7 +195,7 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
             loop, annot, writer, recorder, first = _start(
                 rig, source, stage, driver=driver, profile=profile, config=config, paced=paced, n_bg=n_bg,
                 background_step=background_step, video=video, record=record, title=title, foveal=foveal,
-                hooks=hooks, control_hooks=control_hooks, screenshot_at=screenshot_at)
+                hooks=hooks, control_hooks=control_hooks, screenshot_at=screenshot_at, console=console, mqtt=mqtt)
         setup_s = time.monotonic() - t0
         loop.install_signal_handlers()
         try:
@@ -198,11 +207,18 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
             for w in (writer, recorder):
                 if w is not None:
                     w.close()
+            loop.events.close()
         summary = loop.summary()
+        summary["events"] = loop.events.summary()
+        if mqtt is not None:
+            summary["events"]["mqtt"] = mqtt.summary()
+        if console is not None:
+            summary["console"] = {"url": console.url, "operator": loop.counts["operator_frames"]}
         view = stage / "view.png"
         summary.update({"source": source.name, "setup_s": setup_s, "background_frames": n_bg,
                         "background_step": background_step, "first_frame": first, "ptz_homed": homed,
-                        "outputs": {"log": "log.jsonl", **({"video": writer.name} if writer else {}),
+                        "outputs": {"log": "log.jsonl", "events": "events.jsonl",
+                                    **({"video": writer.name} if writer else {}),
                                     **({"record": recorder.name} if recorder else {}),
                                     **({"view": view.name} if view.is_file() else {})}})
         video_counters = _source_counters(source)  # a network stream: reconnects, drops, outage
@@ -226,7 +242,7 @@ def _source_counters(source) -> dict | None:
 
 def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: LoopConfig, paced: bool, n_bg: int,
            background_step: int, video: bool, record: bool, title: str, foveal, hooks: tuple,
-           control_hooks: tuple, screenshot_at: int | None):
+           control_hooks: tuple, screenshot_at: int | None, console=None, mqtt=None):
     """Start-up of :func:`run_session`: the background, the detector, the writers, the loop, compiled."""
     W, H = rig.omni.image_size
     frames = source.frames()
@@ -238,10 +254,17 @@ def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: Lo
     writer = VideoOut(stage, source.fps or 25.0, (W + W // 2, H)) if video else None
     annot = Annotator(rig, title, foveal, [writer.write] if writer else [])
     capture = Capture(source, paced=paced, frames=frames, first_index=first, shape=(H, W, 3))
+    drawn = video or screenshot_at is not None or console is not None
     loop = RealTimeLoop(rig, detector, bg, capture, driver, profile, config, stage / "log.jsonl",
-                        on_frame=chain_hooks(*hooks, annot if (video or screenshot_at is not None) else None),
-                        on_control=chain_hooks(*control_hooks) if control_hooks else None)
+                        on_frame=chain_hooks(*hooks, annot if drawn else None),
+                        on_control=chain_hooks(*control_hooks) if control_hooks else None,
+                        operator=console.operator if console is not None else None)
     annot.loop = loop
+    live = console.attach(loop, rig, annot, stage, driver, profile) if console is not None else None
+    sinks = tuple(s for s in (live.event if live is not None else None, mqtt) if s is not None)
+    loop.events = EventLog(stage, face_image=lambda: annot.inset[0], sinks=sinks)
+    if console is not None:
+        console.events = loop.events
 
     def shoot(record, frame, dets, z, tracks, command, status):
         if screenshot_at is not None and status["frames"] == screenshot_at and annot.last is not None:
@@ -255,9 +278,9 @@ def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: Lo
             recorder.write(frame.image)
         return {}
 
-    loop.on_frame = chain_hooks(loop.on_frame, shoot, rec)
+    loop.on_frame = chain_hooks(loop.on_frame, loop.events, live, shoot, rec)
     blank_dets = jax.device_get(loop.warm_up())
-    if video or screenshot_at is not None:
+    if drawn:
         annot.warm_up(np.zeros((H, W, 3), np.uint8), blank_dets)
     return loop, annot, writer, recorder, first
 

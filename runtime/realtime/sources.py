@@ -195,3 +195,26 @@ class FaultySource(Source):
 
     def close(self):
         self.source.close()
+
+
+class LatestImage:
+    """A second video shown beside the loop, e.g. the PTZ camera's own stream (``run --ptz-video``): a
+    :class:`Capture` runs it, and each call (the operator's view's ``foveal``, on the drawing thread)
+    returns its newest image (the last one while nothing new came) and ``label``."""
+
+    def __init__(self, source: Source, label: str = "PTZ camera"):
+        self.capture = Capture(source, paced=True, max_age_s=float("inf"))
+        self.label, self.image = label, None
+
+    def __enter__(self) -> LatestImage:
+        self.capture.__enter__()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.capture.stop()
+
+    def __call__(self, frame=None, loop=None) -> tuple[np.ndarray | None, str]:
+        got = self.capture.get(timeout=0.0)
+        if got is not None and got.image is not None:
+            self.image = got.image
+        return self.image, self.label

@@ -6,7 +6,10 @@
   Only *trusted* tracks (:func:`is_trusted`, under a :class:`TrustRule`) that the PTZ *can frame*
   (the caller's ``framable`` test, :func:`can_frame` on the aim) are targeted; when tracks exist
   but none qualifies, the selector holds (no target) and says why in ``held``: ``"untrusted"``
-  or ``"unframeable"``.
+  or ``"unframeable"``. People in a *priority* zone (``priority``, from the rig's ``[[zones]]``)
+  come first, and take the PTZ from a target outside one at once. The operator may choose the
+  target (``manual``: kept while it is there and can be framed, trusted or not) or pause the
+  automatic choice (``paused``: no target, ``held`` is ``"paused"``).
 - :func:`outside_dead_zone`: a new pan/tilt is sent only when it moves by more than ``k`` standard
   deviations of the propagated pointing uncertainty (or the zoom by more than ``zoom_rel``), so
   that the PTZ does not hunt after noise.
@@ -29,7 +32,7 @@ from runtime.realtime.tracker import HISTORY, Track
 #: How the target is chosen (``LoopConfig.target``, ``--target``).
 TARGET_MODES: tuple[str, ...] = ("round-robin", "single")
 #: Why the selector holds with tracks present (``TargetSelector.held``).
-HOLD_REASONS: tuple[str, ...] = ("untrusted", "unframeable")
+HOLD_REASONS: tuple[str, ...] = ("untrusted", "unframeable", "paused")
 
 
 @dataclass(frozen=True)
@@ -145,31 +148,56 @@ class TargetSelector:
         self.settled_at: float | None = None
         self.captures = 0
         self.held: str | None = None
+        #: ``priority(xy) -> bool``: whether a floor point (m) lies in a priority zone (``None``: no zones)
+        self.priority: Callable[[np.ndarray], bool] | None = None
+
+    def _first(self, track: Track) -> bool:
+        return self.priority is not None and bool(self.priority(track.position))
+
+    def _dwell(self, t: float, cur: Track, settled: bool) -> bool:
+        """Whether the PTZ has dwelt on ``cur`` for ``dwell_s`` since settling; marks its face captured then."""
+        if settled and self.settled_at is None:
+            self.settled_at = t
+        dwelt = self.settled_at is not None and t - self.settled_at >= self.dwell_s
+        if dwelt and not cur.captured:
+            cur.captured = True
+            self.captures += 1
+        return dwelt
 
     def choose(self, t: float, tracks: list[Track], settled: bool,
-               framable: Callable[[Track], bool] | None = None) -> Track | None:
+               framable: Callable[[Track], bool] | None = None, manual: int | None = None,
+               paused: bool = False) -> Track | None:
         """The track to aim at at time ``t`` (the frame's stamp); ``settled`` says whether the PTZ has
-        reached the last command, ``framable(track)`` whether the PTZ can frame it (default: all can).
-        Untrusted tracks are never chosen; ``held`` says why there is no target while tracks exist."""
+        reached the last command, ``framable(track)`` whether the PTZ can frame it (default: all can);
+        ``manual`` the operator's choice, ``paused`` whether the operator paused the automatic choice.
+        Untrusted tracks are never chosen automatically; ``held`` says why there is no target while
+        tracks exist."""
         self.held = None
-        present = bool(tracks)
+        present, everyone = bool(tracks), tracks
         if self.trust is not None:
             self.ghosts.update(t, tracks)
             tracks = [tr for tr in tracks if is_trusted(tr, self.trust)]
         ok = framable or (lambda _tr: True)
+        if paused:
+            self.current, self.settled_at = None, None
+            self.held = "paused" if present else None
+            return None
+        chosen = next((tr for tr in everyone if tr.id == manual), None) if manual is not None else None
+        if chosen is not None and ok(chosen):
+            if self.current != chosen.id:
+                self.current, self.settled_at = chosen.id, None
+            self._dwell(t, chosen, settled)
+            return chosen
         cur = next((tr for tr in tracks if tr.id == self.current), None)
         cur_ok = cur is not None and ok(cur)
         if cur_ok:
-            if settled and self.settled_at is None:
-                self.settled_at = t
-            dwelt = self.settled_at is not None and t - self.settled_at >= self.dwell_s
-            if dwelt and not cur.captured:
-                cur.captured = True
-                self.captures += 1
-            if self.mode == "single" or not dwelt:
+            dwelt = self._dwell(t, cur, settled)
+            waiting = not self._first(cur) and any(tr.id != cur.id and self._first(tr) and ok(tr) for tr in tracks)
+            if (self.mode == "single" or not dwelt) and not waiting:
                 return cur
         others = sorted((tr for tr in tracks if tr.id != self.current),
-                        key=lambda tr: (tr.captured, tr.extra.get("last_targeted", -math.inf), tr.id))
+                        key=lambda tr: (not self._first(tr), tr.captured, tr.extra.get("last_targeted", -math.inf),
+                                        tr.id))
         for nxt in others:
             if ok(nxt):
                 if cur is not None:

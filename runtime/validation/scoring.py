@@ -102,6 +102,8 @@ class DemoScorer:
         out = {"truth": {"visible": n_vis, "missed": missed, "false_alarms": fa}}
         self.in_view[inside] += 1
         self.person_frames += bool(len(inside))
+        if record.get("operator") in ("point", "paused"):  # the operator had the PTZ: not the loop's choice
+            return out
         if command is None and len(inside):
             self.held[record.get("held") or "no_track"] += 1
         if command is not None:

@@ -288,3 +288,58 @@ def test_a_person_walking_through_a_ghost_site_leaves_no_trail_of_sites():
     lost = [0.04 * k for k, ok in enumerate(trusted) if not ok]
     # untrusted from 0.6 m (the site's edge) until 0.5 m beyond its far edge (1.4 m): 1.3 s at 1 m/s
     assert lost[0] == pytest.approx(0.6, abs=0.05) and lost[-1] == pytest.approx(1.86, abs=0.05)
+
+
+def test_priority_zone_people_come_first_and_take_the_ptz_at_once():
+    """A person standing in a priority zone is chosen before the others, and takes the PTZ from a
+    target outside one without waiting for its dwell; within the zones the usual order holds."""
+    sel = TargetSelector("round-robin", dwell_s=2.0)
+    tracks = _tracks(1, 2, 3)
+    sel.priority = lambda xy: xy[0] >= 3.0  # track 3 stands in the zone
+    assert _ids(sel.choose(0.0, tracks, settled=False)) == 3
+    sel.priority = lambda xy: xy[0] >= 2.0  # track 2 walks into it too: 3 keeps the PTZ until dwelt
+    assert _ids(sel.choose(0.5, tracks, settled=True)) == 3
+    assert _ids(sel.choose(2.5, tracks, settled=True)) == 2  # 3 captured, 2 (in a zone) before 1
+    sel.priority = None
+    assert _ids(sel.choose(4.5, tracks, settled=True)) == 2  # settled at 2.5 (not yet dwelt: 4.5 - 2.5 < 2) ...
+    sel.priority = lambda xy: xy[0] <= 1.0  # ... but 1 walks into a zone: it takes the PTZ now
+    assert _ids(sel.choose(4.75, tracks, settled=True)) == 1
+
+
+def test_the_operator_chooses_or_pauses():
+    """``manual``: the operator's track, trusted or not, while it is there and framable, then the selector's
+    own choice again; ``paused``: no target, ``held`` says so (only when there are tracks)."""
+    sel = TargetSelector("round-robin", dwell_s=1.0, trust=TrustRule(hits=8, window=10, min_age_s=0.4,
+                                                                       min_travel_m=0.5))
+    tracks = _tracks(1, 2)
+    for tr in tracks:
+        tr.trusted = True
+    stranger = _tracks(9)[0]  # never trusted: the selector would never choose it
+    everyone = [*tracks, stranger]
+    assert _ids(sel.choose(0.0, everyone, settled=False)) == 1
+    assert _ids(sel.choose(0.1, everyone, settled=False, manual=9)) == 9
+    assert _ids(sel.choose(0.2, everyone, settled=True, manual=9)) == 9
+    assert _ids(sel.choose(1.3, everyone, settled=True, manual=9)) == 9 and stranger.captured  # dwelt: face
+    assert _ids(sel.choose(1.4, everyone, settled=True, manual=9, framable=lambda tr: tr.id != 9)) in (1, 2)
+    assert _ids(sel.choose(1.5, tracks, settled=True, manual=9)) in (1, 2)  # gone: automatic again
+    assert sel.choose(1.6, everyone, settled=True, paused=True) is None and sel.held == "paused"
+    assert sel.choose(1.7, [], settled=True, paused=True) is None and sel.held is None
+    assert _ids(sel.choose(1.8, everyone, settled=False)) in (1, 2) and sel.held is None
+
+
+def test_operator_state_is_replaced_whole_and_a_pointing_ends():
+    from runtime.realtime.operator import Operator, ZoneSwap
+
+    op = Operator()
+    s0 = op.state
+    op.choose(4)
+    assert op.state.target == 4 and op.state.version == s0.version + 1 and s0.target is None
+    st = op.point(0.1, -0.2, 2.0, seconds=5.0)
+    assert st.pointing(st.point_until - 1.0) == (0.1, -0.2, 2.0) and st.pointing(st.point_until) is None
+    assert op.release().point is None and op.pause(True).paused
+    with pytest.raises(ValueError):
+        op.point(float("nan"), 0.0, 1.0)
+    assert op.take_zones() is None
+    op.offer_zones(ZoneSwap(None, None, (), 1))
+    op.offer_zones(ZoneSwap(None, None, (), 2))
+    assert op.take_zones().version == 2 and op.take_zones() is None

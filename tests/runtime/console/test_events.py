@@ -1,0 +1,89 @@
+"""The event log and the same events on a real MQTT broker (amqtt, started here): a person appears
+(trusted), has their face captured (the PTZ image saved), and leaves."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from runtime.events import EventLog, MqttPublisher, parse_mqtt_url
+from runtime.realtime.tracker import Track
+from tests.runtime.console.broker import Broker, Subscriber
+
+
+def _frames(log, script):
+    """Run ``log`` over frames 0, 1, ... at 25 fps; ``script[k]`` is the list of tracks confirmed at frame k."""
+    for k, tracks in enumerate(script):
+        log(None, SimpleNamespace(index=k, stamp=k / 25), None, None, tracks, None, None)
+
+
+def test_events_are_logged_and_published(tmp_path):
+    walker = Track(id=3, x=np.array([1.0, 2.0, 0.0, 0.0]), P=np.eye(4), t=0.0)
+    blob = Track(id=4, x=np.array([-1.0, 0.0, 0.0, 0.0]), P=np.eye(4), t=0.0)  # never trusted: no events
+    face = np.full((48, 64, 3), 200, np.uint8)
+    with Broker() as broker:
+        sub = Subscriber(broker.port, "home/hall/#")
+        mqtt = MqttPublisher(f"{broker.url}/home/hall").start()
+        log = EventLog(tmp_path, face_image=lambda: face, sinks=(mqtt,))
+        script = [[walker, blob]] * 5
+        _frames(log, script[:2])
+        walker.trusted = True
+        _frames(log, [[]] * 2 + script[2:])  # frames 0-1 again would repeat: stamps only grow
+        walker.captured = True
+        _frames(log, [[walker, blob]] * 6 + [[blob]] * 40)
+        got = sub.wait_for(lambda m: m[0] == "home/hall/events/person_left")
+        status = sub.wait_for(lambda m: m[0] == "home/hall/status")
+        mqtt.close()
+        log.close()
+        sub.close()
+    events = [json.loads(line) for line in (tmp_path / "events.jsonl").read_text().splitlines()]
+    assert [e["event"] for e in events] == ["person_appeared", "face_captured", "person_left"]
+    assert all(e["track"] == 3 and e["xy"] == [1.0, 2.0] for e in events)
+    assert events[1]["face"].startswith("faces/track3_") and (tmp_path / events[1]["face"]).stat().st_size > 0
+    assert events[2]["t"] - events[1]["t"] > 1.0  # left after LEAVE_S without the track
+    assert log.summary() == {"file": "events.jsonl", "person_appeared": 1, "face_captured": 1, "person_left": 1}
+    assert len(log.faces) == 1 and log.faces[0][1][:2] == b"\xff\xd8"
+    assert got and status and status[0][1] == "online"
+    published = [m for m in sub.messages if "/events/" in m[0]]
+    assert [m[1] for m in published] == events  # the same events, in order
+
+
+@pytest.mark.parametrize("url, expected", [
+    ("mqtt://broker.local", ("broker.local", 1883, "omnijax", False)),
+    ("mqtts://u:p%40ss@10.0.0.2:9000/a/b", ("10.0.0.2", 9000, "a/b", True)),
+])
+def test_mqtt_urls(url, expected):
+    u = parse_mqtt_url(url)
+    assert (u.host, u.port, u.prefix, u.tls) == expected
+    assert "p@ss" not in u.shown()
+
+
+@pytest.mark.parametrize("url", ["http://x", "mqtt://", "mqtt://h:99999", "mqtt://h/a/#", "mqtt://h/?x=1"])
+def test_bad_mqtt_urls_say_what_was_expected(url):
+    with pytest.raises(ValueError, match="expected mqtt://"):
+        parse_mqtt_url(url)
+
+
+def test_latest_image_shows_the_newest_frame_of_a_second_video():
+    """``run --ptz-video``: the PTZ camera's own video beside the loop, its newest frame shown (the last one
+    while nothing new comes)."""
+    import time
+
+    from runtime.frames import Source
+    from runtime.realtime.sources import LatestImage
+
+    class Frames(Source):
+        fps, name = 50.0, "ptz"
+
+        def frames(self):
+            for k in range(5):
+                yield np.full((4, 6, 3), k, np.uint8)
+
+    with LatestImage(Frames()) as view:
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and (view()[0] is None or view.image[0, 0, 0] != 4):
+            time.sleep(0.02)
+        assert view.image[0, 0, 0] == 4 and view()[0][0, 0, 0] == 4
