@@ -67,6 +67,8 @@ from .config import (
     INPUT_NAMES as INPUT_NAMES,
     INPUT_UNITS as INPUT_UNITS,
     LAYOUT_NAMES as LAYOUT_NAMES,
+    MAX_PTZS as MAX_PTZS,
+    PTZ as PTZ,
     ConfigError as ConfigError,
     Detection as Detection,
     Foveal as Foveal,

@@ -63,12 +63,13 @@ class FloorGrid:
         return out
 
 
-def floor_grid(room: Room, step: float) -> FloorGrid:
-    """The room's floor sampled every ``step`` metres (cell centres inside the room)."""
+def floor_grid(room: Room, step: float, offset: float = 0.0) -> FloorGrid:
+    """The room's floor sampled every ``step`` metres (cell centres inside the room); ``offset`` (a share
+    of the step) shifts the grid in x and y, e.g. 0.5 for points between those of the unshifted grid."""
     outline = np.asarray(room.outline)
     lo, hi = outline.min(axis=0), outline.max(axis=0)
     nx, ny = (max(1, math.ceil((b - a) / step - 1e-9)) for a, b in zip(lo, hi))
-    mid = 0.5 * (lo + hi)
+    mid = 0.5 * (lo + hi) + offset * step
     xs = mid[0] + (np.arange(nx) - 0.5 * (nx - 1)) * step
     ys = mid[1] + (np.arange(ny) - 0.5 * (ny - 1)) * step
     inside = np.asarray(room.contains(xs[None, :], ys[:, None]))

@@ -45,12 +45,13 @@ _TINY = 1e-30
 
 
 class Layout(eqx.Module):
-    """A PTZ placement: ``D_c`` (m), ``H_f`` (m), ``theta_c`` (rad), and the omni camera's ``H_o`` (m)."""
+    """A PTZ placement: ``D_c`` (m), ``H_f`` (m), ``theta_c`` (rad), and the omni camera's ``H_o`` (m);
+    scalars, or of shape (k,) for k cameras (or k layouts) at once."""
 
-    D_c: Float[Array, ""]
-    H_f: Float[Array, ""]
-    theta_c: Float[Array, ""]
-    H_o: Float[Array, ""]
+    D_c: Float[Array, "*k"]
+    H_f: Float[Array, "*k"]
+    theta_c: Float[Array, "*k"]
+    H_o: Float[Array, "*k"]
 
     def as_dict(self) -> dict[str, float]:
         return {"D_c": float(self.D_c), "H_f": float(self.H_f), "theta_c": float(self.theta_c),
@@ -73,20 +74,20 @@ def place(rig: Rig, layout: Layout) -> Rig:
 class FloorValues(eqx.Module):
     """Per floor point: the pointing's variances (rad^2; and of sin pan, tan tilt, eq 14 and 13's
     quantities), zoom, face pixels, whether ``p_contain`` is met, the PTZ's floor distance D_p (m),
-    and the point's weight in the statistics (0 to 1)."""
+    and the point's weight in the statistics (0 to 1); with a leading axis k for k cameras."""
 
-    var_pan: Float[Array, " n"]
-    var_tilt: Float[Array, " n"]
-    var_sin_pan: Float[Array, " n"]
-    var_tan_tilt: Float[Array, " n"]
-    zoom: Float[Array, " n"]
-    face_px: Float[Array, " n"]
-    feasible: Float[Array, " n"]
-    distance: Float[Array, " n"]
-    weight: Float[Array, " n"]
-    live: Float[Array, " n"]
+    var_pan: Float[Array, "*k n"]
+    var_tilt: Float[Array, "*k n"]
+    var_sin_pan: Float[Array, "*k n"]
+    var_tan_tilt: Float[Array, "*k n"]
+    zoom: Float[Array, "*k n"]
+    face_px: Float[Array, "*k n"]
+    feasible: Float[Array, "*k n"]
+    distance: Float[Array, "*k n"]
+    weight: Float[Array, "*k n"]
+    live: Float[Array, "*k n"]
 
-    def per_point(self, objective: str) -> Float[Array, " n"]:
+    def per_point(self, objective: str) -> Float[Array, "*k n"]:
         """The objective's per-point quantity: ``var(pan) + var(tilt)`` or the face pixels."""
         if objective == "variance":
             return self.var_pan + self.var_tilt
@@ -138,17 +139,28 @@ def floor_statistic(v: Float[Array, " n"], w: Float[Array, " n"], statistic: str
     weighted power mean of order ``sense * q``, ``(sum w v^(sense q) / sum w)^(1 / (sense q))``,
     a smooth stand-in that approaches the worst case from the better side as q grows.
     """
-    total = jnp.sum(w)
     if statistic == "mean":
-        return jnp.sum(w * v) / total
+        return jnp.sum(w * v) / jnp.sum(w)
     if statistic != "worst":
         raise ValueError(f"statistic must be one of {STATISTICS}, got {statistic!r}")
-    use = w > 0
     if sharpness is None:
-        return sense * jnp.max(jnp.where(use, sense * v, -jnp.inf))
-    order = sense * sharpness
-    log_v = jnp.log(jnp.maximum(jnp.where(use, v, 1.0), _TINY))
-    return jnp.exp((logsumexp(order * log_v, b=w) - jnp.log(total)) / order)
+        return sense * jnp.max(jnp.where(w > 0, sense * v, -jnp.inf))
+    return power_mean(v, w, sense * sharpness)
+
+
+def power_mean(v: Float[Array, "*a n"], w: Float[Array, "*a n"], order, axis: int | None = None) -> Array:
+    """Weighted power mean ``(sum w v^order / sum w)^(1 / order)`` of positive ``v`` over ``axis`` (all
+    axes: ``None``), in logarithms (finite for any order). It approaches the largest ``v`` of positive
+    weight as ``order`` grows, the smallest as it falls, from the mean's side. Where every weight
+    along ``axis`` is 0 it is 1, with zero gradient (the double-``where`` of a guarded division)."""
+    total = jnp.sum(w, axis=axis, keepdims=True)
+    some = total > 0
+    w_safe = jnp.where(some, w, 1.0)
+    log_v = jnp.log(jnp.maximum(jnp.where(w_safe > 0, v, 1.0), _TINY))
+    log_mean = (logsumexp(order * log_v, axis=axis, b=w_safe, keepdims=True)
+                - jnp.log(jnp.sum(w_safe, axis=axis, keepdims=True))) / order
+    out = jnp.where(some, jnp.exp(log_mean), 1.0)
+    return jnp.squeeze(out, axis=axis) if axis is not None else out.reshape(())
 
 
 def summarise(rig: Rig, fv: FloorValues) -> dict[str, Array]:

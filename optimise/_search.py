@@ -52,12 +52,13 @@ class Box(eqx.Module):
     upper: Float[Array, " k"]
     periodic: tuple[bool, ...] = eqx.field(static=True)
 
-    def from_unconstrained(self, u: Float[Array, " k"]) -> Float[Array, " k"]:
-        """``x = lower + (upper - lower) (1 + sin u) / 2``; periodic variables pass through."""
+    def from_unconstrained(self, u: Float[Array, "*c k"]) -> Float[Array, "*c k"]:
+        """``x = lower + (upper - lower) (1 + sin u) / 2``; periodic variables pass through (broadcasts
+        over leading axes, e.g. cameras)."""
         bounded = self.lower + (self.upper - self.lower) * 0.5 * (1.0 + jnp.sin(u))
         return jnp.where(jnp.asarray(self.periodic), u, bounded)
 
-    def to_unconstrained(self, x: Float[Array, " k"]) -> Float[Array, " k"]:
+    def to_unconstrained(self, x: Float[Array, "*c k"]) -> Float[Array, "*c k"]:
         """The ``u`` in ``[-pi / 2, pi / 2]`` that :meth:`from_unconstrained` maps to ``x`` (inside the box)."""
         frac = (x - self.lower) / (self.upper - self.lower)
         return jnp.where(jnp.asarray(self.periodic), x, jnp.arcsin(jnp.clip(2.0 * frac - 1.0, -1.0, 1.0)))

@@ -117,7 +117,7 @@ def load_rig(path: str | Path, overrides: dict[str, dict] | None = None,
                 data[section] = {**data.get(section, {}), **keys}
                 source = f"{path} (with command-line overrides)"
     try:
-        rig = parse_rig(data, source=source, read_text=calib_text)
+        return build_rig(data, source, calib_text)
     except ConfigError as exc:
         msg = str(exc)
         for key, flag in (flags or {}).items():
@@ -126,8 +126,14 @@ def load_rig(path: str | Path, overrides: dict[str, dict] | None = None,
             if given and (key in msg or f"{section}: {name} " in msg):
                 raise ConfigError(f"{flag}: {msg}") from None
         raise
+
+
+def build_rig(data: dict, source: str, read_text=None) -> Rig:
+    """:func:`omnijax.parse_rig` of a parsed rig file, and refused (one line naming ``source``) if its omni
+    camera cannot see its own room: every rig a command uses passes here, before any work."""
+    rig = parse_rig(data, source=source, read_text=read_text)
     try:
-        polar_range(rig)  # a rig that cannot see its own room is refused here, before any work
+        polar_range(rig)
     except ConfigError as exc:
         raise ConfigError(f"{source}: {exc}") from None
     return rig

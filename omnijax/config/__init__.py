@@ -8,7 +8,10 @@ types (``Metres``, ``Coordinate``, ``Degrees``, ``within`` ...) that say what a 
 from ._config import (
     INPUT_NAMES as INPUT_NAMES,
     INPUT_UNITS as INPUT_UNITS,
+    LANDSCAPE_MAX as LANDSCAPE_MAX,
     LAYOUT_NAMES as LAYOUT_NAMES,
+    MAX_PTZS as MAX_PTZS,
+    PTZ as PTZ,
     Detection as Detection,
     Foveal as Foveal,
     LayoutSearch as LayoutSearch,

@@ -12,6 +12,7 @@ expected.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping
 from typing import Annotated, Any, Literal, get_args
@@ -100,6 +101,16 @@ class Foveal(eqx.Module):
     pan_limits: Float[Array, "2"]
     tilt_limits: Float[Array, "2"]
     lens: Lens
+
+
+class PTZ(eqx.Module):
+    """A PTZ of a rig with several (a ``[[foveal]]`` table after the first): its placement, limits and
+    lens, and its own calibration sigmas (m, rad). :meth:`Rig.ptz` makes it a one-PTZ rig."""
+
+    foveal: Foveal
+    sigma_D_c: Float[Array, ""]
+    sigma_H_f: Float[Array, ""]
+    sigma_theta_c: Float[Array, ""]
 
 
 class Person(eqx.Module):
@@ -214,7 +225,14 @@ class LayoutSearch(eqx.Module):
 
 
 class Rig(eqx.Module):
-    """A whole dual-camera set-up: what every kernel of omnijax takes."""
+    """A whole dual-camera set-up: what every kernel of omnijax takes.
+
+    ``foveal`` (and the D_c, H_f, theta_c sigmas of ``sigmas``) is the first PTZ; a rig of several
+    (``[[foveal]]`` tables) holds the others in ``more_ptzs``, and every kernel sees one PTZ at a
+    time through :meth:`ptz`. ``ptz_profiles``: each PTZ's device profile as the file names it
+    (``None``: the command's ``--ptz-profile``), for the run-time; empty in :meth:`ptz`'s rigs, so
+    that those of PTZs of one lens table have one structure.
+    """
 
     omni: OmniCamera
     foveal: Foveal
@@ -225,6 +243,26 @@ class Rig(eqx.Module):
     p_contain: Float[Array, ""]
     layout: LayoutSearch
     zoom_rule: ZoomRule = eqx.field(static=True)
+    more_ptzs: tuple[PTZ, ...] = ()
+    ptz_profiles: tuple[str | None, ...] = eqx.field(static=True, default=())
+
+    @property
+    def ptz_count(self) -> int:
+        """How many PTZs the rig has (1 for a ``[foveal]`` table)."""
+        return 1 + len(self.more_ptzs)
+
+    def ptz(self, i: int) -> Rig:
+        """The one-PTZ rig of PTZ ``i`` (0: the first): its placement, lens, limits and sigmas in
+        ``foveal`` and ``sigmas``, the omni camera, person, room and search shared (the device profile
+        left out). One-PTZ rigs of PTZs with lens tables of one length stack for ``jax.vmap``."""
+        if not 0 <= i < self.ptz_count:
+            raise ValueError(f"PTZ {i} of a rig with {self.ptz_count}")
+        one = dataclasses.replace(self, more_ptzs=(), ptz_profiles=())
+        if i == 0:
+            return one
+        p = self.more_ptzs[i - 1]
+        return eqx.tree_at(lambda r: (r.foveal, r.sigmas.D_c, r.sigmas.H_f, r.sigmas.theta_c), one,
+                           (p.foveal, p.sigma_D_c, p.sigma_H_f, p.sigma_theta_c))
     #: ``[[zones]]`` of the omni image (:mod:`omnijax.config._zones`): static, read when the detector
     #: and the target selector are built, never traced.
     zones: tuple[Zone, ...] = eqx.field(static=True, default=())
@@ -349,6 +387,8 @@ class FovealSection(Section):
     image_size: Size
     zoom_range: Annotated[list[Zoom], Len(2, 2)]
     lens: LensSection
+    profile: str | None = Field(None, description="device profile: a TOML file (relative to the rig) or a name "
+                                                   "in configs/devices (optional; default: the command's)")
 
     @model_validator(mode="after")
     def _ranges(self):
@@ -500,9 +540,11 @@ class RigFile(Section):
         default_factory=list, description="[[zones]] of the omni image (optional)")
 
     @model_validator(mode="after")
-    def _geometry(self):
+    def _geometry(self, info):  # info: pydantic.ValidationInfo (a Protocol the jaxtyping hook cannot check)
         """What no rig can be: the omni camera hangs from the ceiling looking down, so people stand
-        below it and nothing the PTZ is mounted on is above it; a face is framed inside the PTZ's image."""
+        below it and nothing the PTZ is mounted on is above it; a face is framed inside the PTZ's image.
+        The PTZ's table is named as the context's ``foveal`` says (``foveal.1``: the second of several)."""
+        fkey = (info.context or {}).get("foveal", "foveal")
         H_o = self.omni.H_o
         if self.person.H_p >= H_o:
             raise ValueError(
@@ -510,7 +552,7 @@ class RigFile(Section):
             )
         if self.foveal.H_f > H_o:
             raise ValueError(
-                f"foveal.H_f = {self.foveal.H_f:g} m is above the omni camera (omni.H_o = {H_o:g} m); the omni "
+                f"{fkey}.H_f = {self.foveal.H_f:g} m is above the omni camera (omni.H_o = {H_o:g} m); the omni "
                 "camera looks down from the ceiling, so the PTZ's pan/tilt centre cannot be above it"
             )
         if self.layout.H_o is not None and self.layout.H_o[0] <= self.person.H_p:
@@ -535,14 +577,14 @@ class RigFile(Section):
         off = _outside_by(outline, D_c * math.cos(theta), D_c * math.sin(theta))
         if off > WALL_TOLERANCE_M:
             raise ValueError(
-                f"foveal.D_c = {D_c:g} m at theta_c_deg = {self.foveal.theta_c_deg:g} puts the PTZ {off:.3g} m "
+                f"{fkey}.D_c = {D_c:g} m at theta_c_deg = {self.foveal.theta_c_deg:g} puts the PTZ {off:.3g} m "
                 f"outside the room's outline; expected it in the room or on a wall (within {WALL_TOLERANCE_M:g} m): "
                 "from outside, the walls hide the room"
             )
         if self.layout.face_target_px > self.foveal.image_size[0]:
             raise ValueError(
                 f"layout.face_target_px = {self.layout.face_target_px:g} px is wider than the PTZ's image "
-                f"(foveal.image_size {self.foveal.image_size[0]} px): no face can be that wide"
+                f"({fkey}.image_size {self.foveal.image_size[0]} px): no face can be that wide"
             )
         return self
 
@@ -639,27 +681,58 @@ def _layout_search(f: RigFile, source: str) -> LayoutSearch:
     )
 
 
+#: Most PTZs a rig may have (``[[foveal]]`` tables).
+MAX_PTZS = 8
+
+
+def _rig_files(data: Mapping[str, Any], source: str) -> list[RigFile]:
+    """The rig file validated once per PTZ: one ``[foveal]`` table, or each of the ``[[foveal]]`` tables
+    in turn (its errors named ``foveal.I``)."""
+    tables = data.get("foveal")
+    if not isinstance(tables, list):
+        return [validate(RigFile, data, source)]
+    if not 1 <= len(tables) <= MAX_PTZS:
+        raise ConfigError(f"{source}: foveal: expected 1 to {MAX_PTZS} [[foveal]] tables (PTZs), got {len(tables)}")
+    files = []
+    for i, table in enumerate(tables):
+        key = f"foveal.{i}"
+        files.append(validate(RigFile, {**data, "foveal": table}, source, context={"foveal": key},
+                              rename={"foveal": key}))
+    return files
+
+
+def _foveal(fo: FovealSection) -> Foveal:
+    lens = Lens(
+        zoom=_a(fo.lens.zoom), fov_h=_a(np.radians(fo.lens.fov_h_deg)),
+        zoom_range=_a(fo.zoom_range), image_size=(fo.image_size[0], fo.image_size[1]),
+    )
+    return Foveal(
+        D_c=_a(fo.D_c), theta_c=_a(math.radians(fo.theta_c_deg)), H_f=_a(fo.H_f),
+        pan_limits=_a(np.radians(fo.pan_limits_deg)), tilt_limits=_a(np.radians(fo.tilt_limits_deg)),
+        lens=lens,
+    )
+
+
 def parse_rig(
     data: Mapping[str, Any], *, source: str = "config", read_text: Callable[[str], str] | None = None
 ) -> Rig:
     """Validate a parsed TOML mapping and build the :class:`Rig`.
 
+    A rig has one ``[foveal]`` table or up to :data:`MAX_PTZS` ``[[foveal]]`` tables (several PTZs,
+    each with its placement, sigmas, lens, limits and optional device profile); the first is
+    ``Rig.foveal``, the others ``Rig.more_ptzs``, and every PTZ is checked against the room and
+    the omni camera like a single one.
     ``read_text`` reads files the config names (the OCamCalib calibration), relative
     to the config; it is the only I/O, and the caller provides it.
     Raises :class:`ConfigError` with one line naming the key and what was expected.
     """
-    f = validate(RigFile, data, source)
+    files = _rig_files(data, source)
+    f = files[0]
     omni = _omni_camera(f.omni, read_text, source)
     fo = f.foveal
-    lens = Lens(
-        zoom=_a(fo.lens.zoom), fov_h=_a(np.radians(fo.lens.fov_h_deg)),
-        zoom_range=_a(fo.zoom_range), image_size=(fo.image_size[0], fo.image_size[1]),
-    )
-    foveal = Foveal(
-        D_c=_a(fo.D_c), theta_c=_a(math.radians(fo.theta_c_deg)), H_f=_a(fo.H_f),
-        pan_limits=_a(np.radians(fo.pan_limits_deg)), tilt_limits=_a(np.radians(fo.tilt_limits_deg)),
-        lens=lens,
-    )
+    foveal = _foveal(fo)
+    more = tuple(PTZ(foveal=_foveal(g.foveal), sigma_D_c=_a(g.foveal.sigma_D_c), sigma_H_f=_a(g.foveal.sigma_H_f),
+                     sigma_theta_c=_a(math.radians(g.foveal.sigma_theta_c_deg))) for g in files[1:])
     pe = f.person
     person = Person(H_p=_a(pe.H_p), R_h=_a(pe.R_h), shoulder_width=_a(pe.shoulder_width))
     sigmas = Sigmas(
@@ -684,5 +757,6 @@ def parse_rig(
     return Rig(
         omni=omni, foveal=foveal, person=person, sigmas=sigmas, detection=detection, room=room,
         p_contain=_a(f.zoom.p_contain), layout=_layout_search(f, source), zoom_rule=f.zoom.rule,
+        more_ptzs=more, ptz_profiles=tuple(g.foveal.profile for g in files),
         zones=zones_in_image(f.zones, omni.image_size, source),
     )

@@ -86,14 +86,18 @@ def _structure(value: Any) -> bool:
     return isinstance(value, dict) or (isinstance(value, list) and any(isinstance(v, dict) for v in value))
 
 
-def one_line_error(exc: pydantic.ValidationError, source: str) -> str:
+def one_line_error(exc: pydantic.ValidationError, source: str, rename: Mapping[str, str] | None = None) -> str:
     """The first error of ``exc`` as one line: ``SOURCE: dotted.key: what was expected (got VALUE)``.
 
     The offending value is shown where it helps (a wrong number or type), not for a
-    missing or unknown key, a validator's own sentence, or a whole table.
+    missing or unknown key, a validator's own sentence, or a whole table. ``rename`` names a
+    top-level key as the file spells it (``{"foveal": "foveal.1"}``: the second ``[[foveal]]`` table).
     """
     err = exc.errors()[0]
-    loc = ".".join(str(p) for p in err["loc"])
+    parts = [str(p) for p in err["loc"]]
+    if parts and rename and parts[0] in rename:
+        parts[0] = rename[parts[0]]
+    loc = ".".join(parts)
     msg = {"missing": "missing key", "extra_forbidden": "unknown key"}.get(
         err["type"], err["msg"].removeprefix("Value error, ")
     )
@@ -107,9 +111,13 @@ def one_line_error(exc: pydantic.ValidationError, source: str) -> str:
 M = TypeVar("M", bound=BaseModel)
 
 
-def validate(model: type[M], data: Any, source: str, error: type[Exception] = ConfigError) -> M:
-    """``model`` validated from ``data`` (a parsed file); failing, raises ``error`` with the one line."""
+def validate(model: type[M], data: Any, source: str, error: type[Exception] = ConfigError,
+             context: Mapping[str, Any] | None = None, rename: Mapping[str, str] | None = None) -> M:
+    """``model`` validated from ``data`` (a parsed file); failing, raises ``error`` with the one line.
+
+    ``context`` is pydantic's validation context (validators that name keys read it); ``rename`` as in
+    :func:`one_line_error`."""
     try:
-        return model.model_validate(dict(data) if isinstance(data, Mapping) else data)
+        return model.model_validate(dict(data) if isinstance(data, Mapping) else data, context=context)
     except pydantic.ValidationError as exc:
-        raise error(one_line_error(exc, source)) from None
+        raise error(one_line_error(exc, source, rename)) from None

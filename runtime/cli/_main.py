@@ -15,7 +15,8 @@ from runtime.errors import Interrupted, UsageError, interrupt_handlers
 
 #: Subcommands, in the order ``--help`` lists them; each is ``runtime.cli.<name>``.
 COMMANDS: tuple[str, ...] = (
-    "demo", "run", "variance", "validate", "render", "detect", "bench", "optimise", "calibrate", "ptz", "ptz-emulator",
+    "demo", "run", "variance", "validate", "render", "detect", "bench", "optimise", "plan", "calibrate", "ptz",
+    "ptz-emulator",
 )
 
 DESCRIPTION = """\

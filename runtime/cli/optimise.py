@@ -30,6 +30,19 @@ and var tan tilt, eq 14 and 13's quantities); and landscape.png (the grid over
 D_c and H_f: the objective, mean var sin pan, mean var tan tilt, the other
 objective).
 
+Several PTZs (--cameras K): every camera's D_c (up to the wall along its own
+azimuth), H_f and theta_c are searched at once, for k = 1 .. K cameras in turn;
+the objective is, over the floor, the best camera's face (or variance) at each
+point. BFGS from several starts (the objective is symmetric under exchanging
+cameras), checked against every set of k placements of a grid of candidates
+(--landscape values per variable, default 7). Adds to layout.json: cameras
+[{D_c_m, H_f_m, theta_c_deg}], grid_best {objective, cameras, method},
+marginal_gain [{k, objective, gain_rel, framing, ...}] and framing (share of
+the floor where the best camera meets p_contain with a face of at least
+face_target_px); maps cameras_map.png (per camera and of the best, for K) and
+marginal_gain.png. A rig of several [[foveal]] tables gives each camera its
+own lens and sigmas (camera i > tables: the last table's).
+
 Flags override the [layout] keys they name (--grid-step-m: grid_step; see
 configs/paper.toml).
 The search's BFGS program compiles on a second thread while the landscape grid
@@ -66,6 +79,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     deprecated_alias(p, "--face-target", p.add_argument(
         "--face-target-px", type=finite_float, metavar="PX",
         help="face width bounding the operational region, px (layout.face_target_px)"))
+    p.add_argument("--cameras", type=int, metavar="K",
+                   help="search K PTZ placements at once (and k = 1 .. K-1 for the marginal gain of each)")
     add_cache_options(p)
     p.add_argument("--no-maps", action="store_true", help="write layout.json only")
     p.set_defaults(func=run)
@@ -187,6 +202,7 @@ def run(args: argparse.Namespace) -> int:
     from runtime.output import dumps, staged_output
 
     t0 = time.perf_counter()
+    check_cameras_flags(args)
     overrides = {key: getattr(args, flag) for flag, key in OVERRIDES.items() if getattr(args, flag) is not None}
     cache = enable_cache(args)
     flags = {f"layout.{key}": "--" + flag.replace("_", "-") for flag, key in OVERRIDES.items()}
@@ -201,6 +217,8 @@ def run(args: argparse.Namespace) -> int:
         floor = floor_grid(rig.room, spec.grid_step)
     except ValueError as exc:
         raise UsageError(f"layout.grid_step: {exc}") from None
+    if args.cameras is not None:
+        return run_cameras(args, rig, floor, t0, cache)
     from optimise import BATCH
 
     chunks = -(-spec.landscape ** len(spec.vary) // BATCH)
@@ -254,5 +272,154 @@ def run(args: argparse.Namespace) -> int:
     print(f"grid best {report['grid_best']['objective']:.6g} {unit} (optimiser better by "
           f"{100 * report['vs_grid_rel']:+.3f} %); on a bound: {report['on_bound'] or 'none'}; "
           f"{report['optimiser']['iterations']} BFGS iterations; {seconds:.1f} s")
+    print(f"wrote {args.out}/layout.json" + (" and maps" if maps else ""))
+    return 0
+
+
+#: Candidate values per search variable of the k-camera grid check, unless --landscape says.
+CAMERA_CELLS = 7
+
+
+def check_cameras_flags(args: argparse.Namespace) -> None:
+    """``--cameras`` and the flags that go with it, checked before any work (one line naming the flag)."""
+    from omnijax.config import LANDSCAPE_MAX, MAX_PTZS
+    from runtime.errors import UsageError
+
+    if args.cameras is None:
+        return
+    if not 1 <= args.cameras <= MAX_PTZS:
+        raise UsageError(f"--cameras: expected 1 to {MAX_PTZS} PTZ cameras, got {args.cameras}")
+    if args.vary is not None:
+        raise UsageError("--vary: not with --cameras (every camera's D_c, H_f and theta_c are searched)")
+    cells = args.landscape or CAMERA_CELLS
+    if args.landscape is not None and not 3 <= cells or cells**3 > LANDSCAPE_MAX:
+        raise UsageError(f"--landscape: with --cameras, expected 3 to {int(LANDSCAPE_MAX ** (1 / 3))} candidate "
+                         f"values per variable (their cube is the candidate placements), got {cells}")
+
+
+def camera_keys(layouts: dict, i: int) -> dict:
+    """Camera ``i``'s placement as ``layout.json`` writes it."""
+    return _json_values(("D_c", "H_f", "theta_c"), (layouts[n][i] for n in ("D_c", "H_f", "theta_c")))
+
+
+def cameras_report(results: list, rig, seconds: float, config: str, cells: int, floor) -> dict:
+    """``layout.json`` for ``--cameras K`` (docs/design.md section 7: ``cameras``, ``objective``, ``grid_best``,
+    ``marginal_gain``; and the one-camera keys of the first camera)."""
+    from optimise import SENSE, SHARPNESS
+
+    spec = rig.layout
+    sense = SENSE[spec.objective]
+    res = results[-1]
+    gains = []
+    for i, r in enumerate(results):
+        prev = results[i - 1].objective if i else None
+        gains.append({
+            "k": r.k, "objective": r.objective, "gain": None if prev is None else sense * (prev - r.objective),
+            "gain_rel": None if prev is None else sense * (prev - r.objective) / abs(prev),
+            "framing": r.summary["framing"], "grid_objective": r.grid_objective,
+            "cameras": [camera_keys(r.layouts, j) for j in range(r.k)], "seconds": sum(r.seconds.values()),
+        })
+    cameras = [{**camera_keys(res.layouts, j), "on_bound": res.on_bound[j]} for j in range(res.k)]
+    return {
+        "config": config,
+        **camera_keys(res.layouts, 0),
+        "cameras": cameras,
+        "objective": res.objective,
+        "objective_start": res.start_objective,
+        "objective_name": spec.objective,
+        "statistic": spec.statistic,
+        "sense": "max" if sense < 0 else "min",
+        "units": "px" if spec.objective == "face_px" else "rad^2",
+        "framing": res.summary["framing"],
+        "grid_best": {"objective": res.grid_objective, "method": res.grid_method,
+                      "cameras": [camera_keys(res.grid_layouts, j) for j in range(res.k)],
+                      "candidates": cells**3, "cells_per_variable": cells},
+        "vs_grid_rel": sense * (res.grid_objective - res.objective) / abs(res.grid_objective),
+        "marginal_gain": gains,
+        "values": {"start": res.start_summary, "optimum": res.summary},
+        "optimiser": {
+            "method": "optimistix.BFGS (reverse mode) on every camera's (reach, H_f, theta_c) at once; "
+                      "the best camera as a power mean over cameras of order " + ", then ".join(map(str, SHARPNESS)),
+            "iterations": sum(s.steps for s in res.starts),
+            "polished_from_grid": res.polished_from_grid,
+            "starts": [{"objective": s.objective, "iterations": s.steps, "converged": s.converged,
+                        "from": [dict(zip(("reach", "H_f_m", "theta_c_deg"), (x[0], x[1], math.degrees(x[2]))))
+                                 for x in s.start]} for s in res.starts],
+        },
+        "bounds": {"D_c_m": [float(rig.layout.lower[0]), "the wall along each camera's azimuth"],
+                   "H_f_m": [float(rig.layout.lower[1]), float(rig.layout.upper[1])],
+                   "theta_c_deg": [math.degrees(float(rig.layout.lower[2])), math.degrees(float(rig.layout.upper[2]))]},
+        "floor": {"grid_step_m": spec.grid_step, "points": floor.size, "near_radius_m": float(spec.near_radius),
+                  "face_target_px": float(spec.face_target_px)},
+        "zoom_rule": rig.zoom_rule,
+        "p_contain": float(rig.p_contain),
+        "seconds": seconds,
+        "timing_s": {f"k{r.k}": r.seconds for r in results},
+        "objective_key": f"{spec.objective}_{spec.statistic}",
+    }
+
+
+def run_cameras(args: argparse.Namespace, rig, floor, t0: float, cache) -> int:
+    """``omnijax optimise --cameras K``: k = 1 .. K cameras searched in turn (their BFGS programs compile
+    on a second thread meanwhile), layout.json and the maps."""
+    import platform
+
+    import jax
+    from tqdm import tqdm
+
+    from optimise import Cameras, stack
+    from runtime.errors import UsageError
+    from runtime.output import dumps, staged_output
+
+    K, spec = args.cameras, rig.layout
+    cells = args.landscape or CAMERA_CELLS
+    cams = Cameras(rig, floor, cells=cells)
+    try:
+        stack(cams.rigs(K))
+    except ValueError as exc:
+        raise UsageError(f"{args.config}: foveal: {exc}") from None
+    steps = len(cams.slots) + K * (spec.starts + 1) + (0 if args.no_maps else 1)
+    with staged_output(args.out) as stage, tqdm(total=steps, desc=f"optimise {K} cameras", unit="step") as bar, \
+            ThreadPoolExecutor(max_workers=1) as pool:
+        compiled = {k: pool.submit(cams.minimiser, k) for k in range(1, K + 1)}
+
+        def progress(stage_name: str, done: bool) -> None:
+            bar.set_postfix_str(stage_name + ("" if done else " (compiling on first use)"))
+            if done:
+                bar.update(1)
+
+        results = []
+        for k in range(1, K + 1):
+            bar.set_description(f"optimise k = {k} of {K}")
+            results.append(cams.search(k, progress, minimiser=compiled[k].result))
+            bar.total += 1 if len(results[-1].starts) > spec.starts else 0
+        seconds = time.perf_counter() - t0
+        report = cameras_report(results, rig, seconds, str(args.config), cells, floor)
+        maps = []
+        if not args.no_maps:
+            from runtime.layout.plots import cameras_figure, marginal_gain_figure
+
+            bar.set_postfix_str("plots")
+            cameras_figure(floor, rig, results[-1], stage / "cameras_map.png")
+            marginal_gain_figure(report["marginal_gain"], rig, report["units"], stage / "marginal_gain.png")
+            maps = ["cameras_map.png", "marginal_gain.png"]
+            bar.update(1)
+        report["maps"] = maps
+        report["compile_cache"] = cache
+        report["versions"] = {"python": platform.python_version(), "jax": jax.__version__}
+        (stage / "layout.json").write_text(dumps(report) + "\n")
+
+    unit = report["units"]
+    print(f"{spec.objective} {spec.statistic} of the best camera, by number of PTZs:")
+    print(f"  {'k':>2}  {'objective':>12}  {'gain':>8}  {'framing':>8}  {'grid best':>12}  seconds")
+    for row in report["marginal_gain"]:
+        gain = "" if row["gain_rel"] is None else f"{100 * row['gain_rel']:+.2f} %"
+        print(f"  {row['k']:>2}  {row['objective']:>9.5g} {unit:<2}  {gain:>8}  {100 * row['framing']:>6.1f} %  "
+              f"{row['grid_objective']:>12.5g}  {row['seconds']:.1f}")
+    for i, cam in enumerate(report["cameras"]):
+        print(f"camera {i + 1}: D_c {cam['D_c_m']:.3f} m, H_f {cam['H_f_m']:.3f} m, "
+              f"theta_c {cam['theta_c_deg']:.1f} deg")
+    print(f"grid best {report['grid_best']['objective']:.6g} {unit} (optimiser better by "
+          f"{100 * report['vs_grid_rel']:+.3f} %); {seconds:.1f} s")
     print(f"wrote {args.out}/layout.json" + (" and maps" if maps else ""))
     return 0

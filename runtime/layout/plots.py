@@ -9,6 +9,8 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
+import jax
+import jax.numpy as jnp
 import matplotlib.pyplot as plt
 import numpy as np
 
@@ -178,5 +180,103 @@ def landscape_figure(result: SearchResult, rig: Rig, path: Path) -> None:
     keys = "x: where each start ended; dashed: H_p - R_h" if len(shown) == 2 else "dashed: the layouts marked"
     fig.suptitle(f"landscape: {result.evaluations['landscape_layouts']} layouts x "
                  f"{result.evaluations['floor_points']} floor points{note}; {keys}", fontsize=10)
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def _draw_room(ax, rig: Rig, colour: str = "w") -> None:
+    """The room's outline and excluded zones, and the omni axis, in floor metres."""
+    ax.plot(0.0, 0.0, "+", color=colour, ms=10, mew=2)
+    for poly, style in [(rig.room.outline, "-")] + [(z, ":") for z in rig.room.exclude]:
+        pts = np.asarray(poly)
+        loop = np.vstack([pts, pts[:1]])
+        ax.plot(loop[:, 0], loop[:, 1], style, color=colour, lw=1)
+
+
+def cameras_figure(grid: FloorGrid, rig: Rig, result, path: Path) -> None:
+    """k cameras (``optimise.CamerasResult``): each camera's per-point objective where it serves the floor
+    (its near zone left out), and the best camera's, with which camera is best outlined; every PTZ
+    drawn and numbered, the framed region (p_contain met, face >= target) outlined in red."""
+    from optimise import best_camera, framed
+
+    objective = rig.layout.objective
+    label, pick = MAP_QUANTITIES[objective]
+    fv = result.values
+    k = result.k
+    per = [grid.to_map(np.where(np.asarray(fv.weight[i]) > 0, np.asarray(pick(_camera(fv, i))), np.nan))
+           for i in range(k)]
+    arrays = jax.tree.map(jnp.asarray, fv)
+    best, weight, which = (np.asarray(a) for a in best_camera(arrays, objective))
+    scale = (lambda v: np.log10(v)) if objective == "variance" else (lambda v: v)
+    best_map = grid.to_map(np.where(weight > 0, scale(best), np.nan))
+    which_map = grid.to_map(which.astype(float))
+    ok_map = grid.to_map(np.asarray(framed(rig, arrays)).astype(float))
+    finite = np.concatenate([m[np.isfinite(m)] for m in per + [best_map]])
+    lo, hi = np.percentile(finite, [1, 99]) if finite.size else (0.0, 1.0)
+    panels = [(f"camera {i + 1}", m) for i, m in enumerate(per)] + [("best camera", best_map)]
+    cols = min(3, len(panels))
+    rows = -(-len(panels) // cols)
+    ext = grid.extent
+    aspect = (ext[3] - ext[2]) / (ext[1] - ext[0])
+    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 5.2 * rows * max(aspect, 0.35) + 1.2),
+                             constrained_layout=True, squeeze=False)
+    for ax in axes.flat[len(panels):]:
+        ax.axis("off")
+    xs = result.layouts["D_c"] * np.cos(result.layouts["theta_c"])
+    ys = result.layouts["D_c"] * np.sin(result.layouts["theta_c"])
+    for n, (ax, (title, m)) in enumerate(zip(axes.flat, panels)):
+        im = ax.imshow(m, origin="lower", extent=ext, cmap="viridis", vmin=lo, vmax=hi, interpolation="nearest")
+        fig.colorbar(im, ax=ax, shrink=0.8, label=label)
+        _draw_room(ax, rig)
+        for i in range(k):
+            ax.plot(xs[i], ys[i], "o", mfc="r" if i == n or n == k else "0.6", mec="k", ms=10, mew=1.5, clip_on=False)
+            ax.annotate(str(i + 1), (xs[i], ys[i]), xytext=(7, 7), textcoords="offset points", color="k",
+                        fontsize=9, fontweight="bold", annotation_clip=False)
+        if n == k:
+            for i in range(k if k > 1 else 0):  # each camera's region outlined: one line where two meet
+                ax.contour(grid.xs, grid.ys, (which_map == i).astype(float), levels=[0.5], colors="k",
+                           linewidths=1.2)
+            if np.nanmax(ok_map) > 0 and np.nanmin(ok_map) < 1:
+                ax.contour(grid.xs, grid.ys, np.nan_to_num(ok_map, nan=0.0), levels=[0.5], colors="r", linewidths=2)
+        ax.set_aspect("equal")
+        ax.set_facecolor("0.75")
+        pad = 0.04 * max(ext[1] - ext[0], ext[3] - ext[2])  # cameras on the walls stay in view
+        ax.set_xlim(ext[0] - pad, ext[1] + pad)
+        ax.set_ylim(ext[2] - pad, ext[3] + pad)
+        ax.set_title(title, fontsize=10)
+    s = result.summary
+    fig.suptitle(f"{k} PTZ camera{'s' if k > 1 else ''}: {label} per camera where it serves the floor, and the best "
+                 f"camera's (black: where the best camera changes; red: framed region, {100 * s['framing']:.0f} % "
+                 f"of the floor)\n{objective} {rig.layout.statistic} over the floor of the best camera: "
+                 f"{result.objective:.4g}", fontsize=10)
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def _camera(fv: FloorValues, i: int) -> FloorValues:
+    """Camera ``i``'s per-point values of stacked :class:`~optimise.FloorValues` (NumPy)."""
+    return jax.tree.map(lambda a: np.asarray(a)[i], fv)
+
+
+def marginal_gain_figure(rows: list[dict], rig: Rig, units: str, path: Path) -> None:
+    """The objective (left) and the framed share of the floor (right) against the number of PTZs, with
+    each added camera's gain written beside its point: how many to buy."""
+    k = [r["k"] for r in rows]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    axes[0].plot(k, [r["objective"] for r in rows], "o-", color="k", label="optimum")
+    axes[0].plot(k, [r["grid_objective"] for r in rows], "s--", color="c", mfc="none", label="grid's best set")
+    for r in rows[1:]:
+        axes[0].annotate(f"{100 * r['gain_rel']:+.1f} %", (r["k"], r["objective"]), xytext=(5, -12),
+                         textcoords="offset points", fontsize=8)
+    axes[0].set_ylabel(f"{rig.layout.objective} {rig.layout.statistic} of the best camera ({units})")
+    axes[0].legend(fontsize=8)
+    axes[1].plot(k, [100 * r["framing"] for r in rows], "o-", color="r")
+    axes[1].set_ylabel(f"framed floor (%): p_contain met, face >= {float(rig.layout.face_target_px):g} px")
+    axes[1].set_ylim(0, 105)
+    for ax in axes:
+        ax.set_xticks(k)
+        ax.set_xlabel("PTZ cameras")
+        ax.grid(alpha=0.3)
+    fig.suptitle("marginal gain of each added PTZ camera (each k optimised on its own)", fontsize=10)
     fig.savefig(path, dpi=80)
     plt.close(fig)

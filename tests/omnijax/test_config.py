@@ -137,3 +137,55 @@ def test_ocamcalib_missing_file_is_one_line(tmp_path):
 
     with pytest.raises(ConfigError, match="omni.calib_file: cannot read 'nowhere.txt'"):
         parse_rig(d, source="ocam.toml", read_text=read_text)
+
+
+# ---------------------------------------------------------------------------------------------
+# Several PTZs: [[foveal]] tables
+
+
+def _two_ptz_dict() -> dict:
+    d = paper_dict()
+    second = {**copy.deepcopy(d["foveal"]), "D_c": 4.0, "theta_c_deg": 180.0, "sigma_D_c": 0.2,
+              "profile": "sony_evi_d70"}
+    d["foveal"] = [d["foveal"], second]
+    return d
+
+
+def test_foveal_tables_give_one_rig_per_ptz(paper_rig):
+    import jax
+
+    rig = parse_rig(_two_ptz_dict(), source="two.toml")
+    assert rig.ptz_count == 2 and paper_rig.ptz_count == 1
+    assert rig.ptz_profiles == (None, "sony_evi_d70") and paper_rig.ptz_profiles == (None,)
+    first, second = rig.ptz(0), rig.ptz(1)
+    assert float(first.foveal.D_c) == 3.0 and float(first.sigmas.D_c) == 0.10
+    assert float(second.foveal.D_c) == 4.0 and float(second.sigmas.D_c) == 0.20
+    assert float(second.foveal.theta_c) == pytest.approx(math.pi)
+    assert float(second.sigmas.H_o) == float(first.sigmas.H_o)  # the omni camera's are shared
+    # one structure: the PTZs stack for jax.vmap, and a [foveal] rig's PTZ 0 is the same kind of rig
+    assert jax.tree.structure(first) == jax.tree.structure(second) == jax.tree.structure(paper_rig.ptz(0))
+    with pytest.raises(ValueError, match="PTZ 2 of a rig with 2"):
+        rig.ptz(2)
+
+
+@pytest.mark.parametrize("change,expect", [
+    ({"D_c": -1.0}, "two.toml: foveal.1.D_c: expected metres in [0, 1000]"),
+    ({"H_f": 3.5}, "two.toml: foveal.1.H_f = 3.5 m is above the omni camera"),
+    ({"D_c": 9.0}, "two.toml: foveal.1.D_c = 9 m at theta_c_deg = 180 puts the PTZ 4.5 m outside"),
+    ({"zoom": 2.0}, "two.toml: foveal.1.zoom: unknown key"),
+    ({"profile": 3}, "two.toml: foveal.1.profile"),
+])
+def test_bad_foveal_table_is_one_line_naming_it(change, expect):
+    d = _two_ptz_dict()
+    d["foveal"][1].update(change)
+    with pytest.raises(ConfigError) as err:
+        parse_rig(d, source="two.toml")
+    assert "\n" not in str(err.value) and str(err.value).startswith(expect)
+
+
+@pytest.mark.parametrize("count", [0, 9])
+def test_foveal_table_count_is_bounded(count):
+    d = paper_dict()
+    d["foveal"] = [copy.deepcopy(d["foveal"]) for _ in range(count)]
+    with pytest.raises(ConfigError, match=r"^bad.toml: foveal: expected 1 to 8 \[\[foveal\]\] tables"):
+        parse_rig(d, source="bad.toml")
