@@ -35,12 +35,13 @@ settings.register_profile(
 settings.load_profile("omnijax")
 
 
-#: The test file with the longest child process (`omnijax validate`, a minute or more): collected
-#: first, so that one of `make test`'s two workers (pytest-xdist, one file at a time) starts it at
-#: once and the other works through the short files meanwhile, instead of waiting for it at the
-#: end. The demo's file stays in its place: run beside `validate` on a loaded machine, its PTZ
-#: emulator answered too late for the driver to reconnect after the injected unplug.
-LONGEST_FIRST = ("tests/runtime/cli/test_variance_validate.py",)
+#: The test files with the longest child processes (the console's demo, its browser and calibration
+#: sessions; `omnijax validate`): collected first, so that one of `make test`'s two workers
+#: (pytest-xdist, one file at a time) starts them at once and the other works through the short
+#: files meanwhile, instead of waiting for them at the end. The demo's file stays in its place: run
+#: beside `validate` on a loaded machine, its PTZ emulator answered too late for the driver to
+#: reconnect after the injected unplug.
+LONGEST_FIRST = ("tests/runtime/console/test_console.py", "tests/runtime/cli/test_variance_validate.py")
 
 
 def pytest_collection_modifyitems(config, items):

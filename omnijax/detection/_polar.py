@@ -75,16 +75,12 @@ def polar_range(rig: Rig) -> tuple[float, float]:
     :class:`~omnijax.config.ConfigError` naming the keys that decide it.
     """
     omni, det = rig.omni, rig.detection
-    r_min = float(point_image_radius(det.min_floor_radius, 0.0, omni.r_m, omni.H_o, omni.profile))
-    if det.r_max is not None:
-        r_max = det.r_max
-    else:
-        poly = np.asarray(rig.room.outline)
-        t = np.linspace(0.0, 1.0, 64)[:, None]
-        edges = np.concatenate([a + t * (b - a) for a, b in zip(poly, np.roll(poly, -1, 0))])
-        R_far = float(np.hypot(edges[:, 0], edges[:, 1]).max())
-        _, r_out = person_image_extent(R_far, omni, rig.person.H_p, rig.person.R_h, body_radius(rig))
-        r_max = float(r_out) + 2.0
+    poly = np.asarray(rig.room.outline)
+    t = np.linspace(0.0, 1.0, 64)[:, None]
+    edges = np.concatenate([a + t * (b - a) for a, b in zip(poly, np.roll(poly, -1, 0))])
+    R_far = float(np.hypot(edges[:, 0], edges[:, 1]).max())
+    r_min, r_out = (float(v) for v in _range_radii(rig, R_far))
+    r_max = det.r_max if det.r_max is not None else r_out + 2.0
     W, H = omni.image_size
     r_max = min(r_max, float(omni.rim), math.hypot(W, H))
     if not r_max > r_min + MIN_POLAR_SPAN_PX:
@@ -95,6 +91,16 @@ def polar_range(rig: Rig) -> tuple[float, float]:
             "omni.rim, detection.r_max and room.outline)"
         )
     return r_min, r_max
+
+
+@jax.jit
+def _range_radii(rig: Rig, R_far):
+    """Image radius of the floor circle of ``min_floor_radius`` and the outer end of a person at
+    floor radius ``R_far`` (one compiled program: op by op, it took seconds at every start)."""
+    omni = rig.omni
+    r_min = point_image_radius(rig.detection.min_floor_radius, 0.0, omni.r_m, omni.H_o, omni.profile)
+    _, r_out = person_image_extent(R_far, omni, rig.person.H_p, rig.person.R_h, body_radius(rig))
+    return r_min, r_out
 
 
 @jax.jit

@@ -57,7 +57,8 @@ def learn_from_frames(frames_iter: Iterable, n: int, step: int, what: str):
             break
     if len(got) < n:
         raise UsageError(f"{what}: only {len(got)} readable frames, expected at least {n} to learn the background "
-                         f"(--background-frames, every {step}th frame)")
+                         f"(--background-frames {n}, one every {step} frames: --background-seconds spreads "
+                         f"them; lower it for a short clip, 0 takes consecutive frames)")
     first = np.asarray(got[0])
     if any(np.shape(g) != first.shape for g in got):
         raise UsageError(f"{what}: the frames change size while the background is learnt")

@@ -114,6 +114,7 @@ _hysteresis = jax.jit(hysteresis_sectors, static_argnums=3)
 
 @settings(max_examples=300)
 @given(seed=st.integers(0, 2**31 - 1), T=st.sampled_from([12, 36, 360]))
+@pytest.mark.slow
 def test_hysteresis_matches_reference(seed, T):
     rng = np.random.default_rng(seed)
     M = np.convolve(rng.exponential(1.0, T + 4), np.ones(5) / 5, "valid")[:T]
@@ -135,6 +136,7 @@ def test_hysteresis_sector_across_zero_and_top_k():
 
 @settings(max_examples=100)
 @given(seed=st.integers(0, 2**31 - 1))
+@pytest.mark.slow
 def test_foot_scores_are_eq_12_brute_force(paper_detector, seed):
     polar = paper_detector.polar
     rng = np.random.default_rng(seed)

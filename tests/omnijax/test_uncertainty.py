@@ -207,6 +207,7 @@ def test_gum_second_order_cubic_keeps_the_third_derivative_term():
     assert c == pytest.approx(9 * m**4 * v + 36 * m**2 * v**2, rel=1e-13)
 
 
+@pytest.mark.slow
 def test_gum_second_order_matches_the_full_third_derivative_tensor(paper_rig):
     """The directional form of the third-derivative term against the literal one (jacfwd of the
     Hessian, all m n^3 entries), on the pointing at 5 floor points (fixed seed), near the PTZ too."""

@@ -127,6 +127,7 @@ def test_best_camera_is_the_best_served_value(small):
     assert np.all(var_best[ok] == np.where(served, np.asarray(fv.var_pan + fv.var_tilt), np.inf).min(axis=0)[ok])
 
 
+@pytest.mark.slow
 def test_k_camera_gradients_match_finite_differences(small):
     """The smooth objective (order 32 over cameras) for two cameras w.r.t. all six placement variables, face
     mean and variance worst case (the one-camera test covers the other two): reverse mode (the search's)

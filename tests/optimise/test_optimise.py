@@ -162,6 +162,7 @@ def test_default_bounds_come_from_the_room_and_the_heights(paper_rig, fisheye_ri
 # The search against its grid
 
 
+@pytest.mark.slow
 def test_search_matches_its_grid_and_reports_the_bound():
     """Mean variance in the paper's room: the optimum sits on D_c's upper bound (the wall), as the
     paper's section 6 and docs/design.md section 4.14 expect; the optimiser is within 0.5 % of the grid's best."""

@@ -53,6 +53,7 @@ def _floor_patch(world, centre, radius: float) -> np.ndarray:
 # --------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_standing_start_people_stand_then_walk():
     """standing_start (first_pause 4 .. 12 s), 400 frames (16 s): each person stands on one spot, not
     moving, until a time within the range, then walks; the truth lines say so."""
@@ -74,6 +75,7 @@ def test_standing_start_people_stand_then_walk():
         assert not a["moving"] and not b["moving"] and a["foot_m"] == b["foot_m"]
 
 
+@pytest.mark.slow
 def test_a_stop_lasts_over_a_minute():
     """stops_a_minute, 1850 frames (74 s): person 0 has zero velocity and ``moving`` false in every frame
     from 6 s to 72 s (>= 65 s), slows down to under 0.1 m/s before it, walks before and after; the
@@ -138,6 +140,7 @@ def test_moved_chair_switches_the_static_view_at_its_time(chair):
     assert diff[still].mean() < 2.0  # |difference| of two noisy frames: ~1.2 grey levels at sigma 1
 
 
+@pytest.mark.slow
 def test_people_keep_clear_of_both_places_of_the_chair():
     """chair_moved, 2000 frames (80 s): every person's disc stays clear of the chair's footprint at both
     places in every frame (before and after the move), and of the other furniture."""
@@ -188,6 +191,7 @@ def _chromaticity_change(world, lamp: int, t0: int, t1: int):
     return d, cov, n
 
 
+@pytest.mark.slow
 def test_a_lamp_of_its_own_spectrum_changes_chromaticity_when_it_switches(two_spectra):
     """A floor patch under a lamp, just before and after it switches off, 8-bit frames with noise (n > 400
     pixels). Two spectra (two_spectra, the warm lamp 2 off at 6 s): the mean chromaticity moves by
@@ -223,6 +227,7 @@ def test_shadows_change_chromaticity_under_two_spectra(two_spectra):
     assert np.median(change) > 0.005
 
 
+@pytest.mark.slow
 def test_each_lamp_lights_in_its_own_spectrum(two_spectra):
     """Noise-free frames of two_spectra with only lamp j on and no ambient light equal (float32 rounding)
     those of the same world rendered under one spectrum, lamp j's (the one-plane path): background,
@@ -258,6 +263,7 @@ THREE_PEOPLE = {
 }
 
 
+@pytest.mark.slow
 def test_one_spectrum_scenarios_render_as_before():
     """three_people renders bit for bit as before this world had per-lamp spectra, moving furniture and
     stops: same walk, same frames (see THREE_PEOPLE)."""

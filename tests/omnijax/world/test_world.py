@@ -180,6 +180,7 @@ def test_person_draw_statistics(paper_rig):
         assert np.all(np.abs(got - mean) <= 4 * sigma + 1e-12)
 
 
+@pytest.mark.slow
 def test_seeds_repeat_and_differ(six):
     """The same seed gives the same world, frame for frame (bit for bit); another seed another
     true rig, other people and other frames."""
@@ -276,6 +277,7 @@ def test_lamp_switch_scales_without_changing_chromaticity(six):
                                atol=2e-6)
 
 
+@pytest.mark.slow
 def test_noise_statistics_empty_room():
     """Empty room, steady light, 200 frames: per-pixel variance (mean over 40,000 pixels) equals
     sigma^2 + 1/12 (8-bit rounding) within 2 %; no correlation between neighbours or frames

@@ -83,6 +83,7 @@ def test_levenberg_marquardt_recovers_a_noiseless_rig(paper_rig):
     assert fit.dof == 2 * 12 - 6  # 6 positions, marks at two heights: 12 aims
 
 
+@pytest.mark.slow
 def test_nees_is_honest_at_fixed_seed(paper_rig):
     """n = 200 simulated calibrations (K = 6 positions, marks at 0 and 1.5 m), seed 0.
 

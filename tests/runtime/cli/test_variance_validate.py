@@ -75,6 +75,7 @@ def test_help_lists_every_command(capsys):
 TABLE1_ROW = {"position", "pred_var_tan_tilt", "emp_var_tan_tilt", "pred_var_sin_pan", "emp_var_sin_pan", "trials"}
 
 
+@pytest.mark.slow
 def test_validate_quick_writes_report_and_maps(tmp_path):
     # as a user runs it: a separate process (the world's renderer is type-checked by its own tests)
     out = tmp_path / "val"

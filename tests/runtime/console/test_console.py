@@ -87,7 +87,7 @@ def demo(tmp_path_factory):
         subscriber = Subscriber(broker.port, "test/console/#")
         proc = subprocess.Popen(
             [sys.executable, "-m", "runtime.cli", "demo", "--scenario", str(folder / "three_people.toml"),
-             "--out", str(out), "--frames", "30000", "--background-step", "1", "--inset-every", "4", "--quiet",
+             "--out", str(out), "--frames", "30000", "--background-seconds", "0", "--inset-every", "4", "--quiet",
              "--max-seconds", "900", "--serve", "127.0.0.1:0", "--mqtt", f"{broker.url}/test/console"],
             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         lines: list[str] = []
@@ -219,6 +219,7 @@ def test_zones_go_into_the_running_loop_and_the_rig_file(demo):
     assert load_rig(demo.rig).zones == ()
 
 
+@pytest.mark.slow
 def test_calibration_assistant_records_aims_and_fits_the_rig(demo):
     """Drive the PTZ onto marks (the rig's own pointing at each mark, as an operator would by eye), click
     each mark's foot: the assistant reads the PTZ back, writes observations.json and runs the fit."""

@@ -62,6 +62,7 @@ def test_calibrate_finds_the_emulators_speeds_and_latency():
     assert latency - 0.01 <= p["link.command_latency_s"] <= latency + 0.1
 
 
+@pytest.mark.slow
 def test_cli_calibrate_writes_a_profile_that_loads(tmp_path, capsys):
     profile = default_profile("visca")
     out = tmp_path / "cam.toml"

@@ -91,7 +91,7 @@ def omnijax(*args: str) -> subprocess.Popen:
 @pytest.fixture(scope="module")
 def demo_out(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo") / "out"
-    proc = omnijax("demo", "--out", str(out), "--frames", "200", "--pace", "all", "--background-step", "1",
+    proc = omnijax("demo", "--out", str(out), "--frames", "200", "--pace", "all", "--background-seconds", "0",
                    "--screenshot", "50", "--inset-every", "20", "--faults", FAULTS, "--record", "--quiet")
     stdout, stderr = proc.communicate(timeout=400)
     assert proc.returncode == 0, stderr[-2000:]
@@ -153,7 +153,8 @@ def test_run_on_a_video_with_the_emulator_stops_cleanly_on_sigterm(demo_out, tmp
     out = tmp_path / "run"
     with PtyEmulator(default_profile("visca")) as emulator:
         proc = omnijax("run", str(demo_out / "omni.avi"), "--config", PAPER, "--ptz", emulator.path,
-                       "--out", str(out), "--pace", "all", "--no-video", "--quiet")
+                       "--out", str(out), "--pace", "all", "--no-video", "--quiet",
+                       "--background-seconds", "0")  # the clip is 8 s: learn from its first frames
         deadline = time.monotonic() + 300
         while time.monotonic() < deadline and proc.poll() is None:
             logs = list(tmp_path.glob(".run.partial-*/log.jsonl"))
@@ -171,6 +172,7 @@ def test_run_on_a_video_with_the_emulator_stops_cleanly_on_sigterm(demo_out, tmp
     assert len((out / "log.jsonl").read_text().splitlines()) == s["frames"]
 
 
+@pytest.mark.slow
 def test_run_on_a_network_stream_reconnects_and_steers_a_visca_ip_ptz(demo_out, tmp_path):
     """``omnijax run http://...`` on the demo's recorded omni frames served as MJPEG over HTTP
     (127.0.0.1, a port the OS picks), steering a VISCA over IP emulator; the stream is dropped

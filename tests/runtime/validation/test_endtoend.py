@@ -66,7 +66,7 @@ def test_match_takes_the_sector_that_covers_the_person():
     dets = Detections(valid=jnp.array([True, True, False]), r_f=jnp.array([10.0, 20.0, 30.0]),
                       theta_f=jnp.array([1.0, 3.1, 0.5]), sigma_r_f=z + 1, sigma_theta_f=z + 0.01, contrast=z + 9,
                       r_in=z, r_out=z, theta_l=jnp.array([0.9, 3.0, 0.4]), theta_r=jnp.array([1.1, -3.0, 0.6]),
-                      peak=z)
+                      peak=z, region=jnp.zeros((3, 4), jnp.int32))
     m, others = e.match(dets, -3.1)  # the second sector wraps around +-pi
     assert bool(m.found) and float(m.r_f) == 20.0 and int(others) == 1
     m, others = e.match(dets, 0.5)  # only an invalid sector there: a miss, two false alarms
