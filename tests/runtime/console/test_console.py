@@ -251,6 +251,7 @@ def test_calibration_assistant_records_aims_and_fits_the_rig(demo):
     assert all(p["sigma"] > 0 for p in params.values())
     assert abs(params["H_o"]["value"] - float(rig.omni.H_o)) < 0.2
     assert len(report["result"]["residuals_deg"]["pan"]) == 2 * len(marks)
+    assert (demo.out / "calibration" / "observations.json").is_file()
     assert call(demo, "POST", "/api/release")[0] == 200
 
 
@@ -358,6 +359,5 @@ def test_sigterm_ends_the_run_and_everything_is_written(demo):
     assert all((demo.out / e["face"]).is_file() for e in events if e["event"] == "face_captured" and e["face"])
     assert s["events"]["mqtt"]["published"] == len(events)
     assert s["console"]["operator"] > 0 and s["counts"]["operator_frames"] == s["console"]["operator"]
-    assert (demo.out / "calibration" / "observations.json").is_file()
     published = lambda: [m[1] for m in list(demo.subscriber.messages) if "/events/" in m[0]]
     assert wait_for(lambda: len(published()) == len(events), 10) and published() == events
