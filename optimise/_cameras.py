@@ -41,6 +41,7 @@ import optimistix as optx
 from jaxtyping import Array, Float
 
 from omnijax import Rig, Room
+from omnijax.config import stack_ptzs as stack
 
 from ._floor import FloorGrid
 from ._objective import SENSE, FloorValues, Layout, floor_statistic, floor_values, power_mean
@@ -86,16 +87,6 @@ def kernel_rig(rig: Rig) -> Rig:
     m = -(-len(outline) // OUTLINE_PAD) * OUTLINE_PAD
     padded = np.concatenate([outline, np.repeat(outline[-1:], m - len(outline), axis=0)])
     return eqx.tree_at(lambda r: r.room, rig, Room(outline=jnp.asarray(padded), exclude=()))
-
-
-def stack(trees: Sequence) -> object:
-    """PyTrees of one structure stacked along a new leading axis (cameras); a ``ValueError`` naming the
-    difference otherwise (PTZs whose lens tables differ in length do not stack)."""
-    structures = {jax.tree.structure(t) for t in trees}
-    if len(structures) > 1:
-        raise ValueError("the PTZs differ in structure (lens tables of different lengths?); several PTZs are "
-                         "searched together only with lens tables of one length")
-    return jax.tree.map(lambda *v: jnp.stack(v), *trees)
 
 
 class CameraBox(eqx.Module):

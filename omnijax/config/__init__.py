@@ -21,6 +21,8 @@ from ._config import (
     Room as Room,
     Sigmas as Sigmas,
     parse_rig as parse_rig,
+    stack_ptzs as stack_ptzs,
+    with_ptz_count as with_ptz_count,
 )
 from ._schema import (
     MAX_LENGTH_M as MAX_LENGTH_M,

@@ -14,10 +14,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Annotated, Any, Literal, get_args
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from annotated_types import Len
@@ -263,6 +264,12 @@ class Rig(eqx.Module):
         p = self.more_ptzs[i - 1]
         return eqx.tree_at(lambda r: (r.foveal, r.sigmas.D_c, r.sigmas.H_f, r.sigmas.theta_c), one,
                            (p.foveal, p.sigma_D_c, p.sigma_H_f, p.sigma_theta_c))
+
+    def ptz_stack(self) -> Rig:
+        """Every PTZ's one-PTZ rig (:meth:`ptz`) stacked along a new leading axis, for ``jax.vmap``
+        over the PTZs (:func:`stack_ptzs`)."""
+        return stack_ptzs([self.ptz(i) for i in range(self.ptz_count)])
+
     #: ``[[zones]]`` of the omni image (:mod:`omnijax.config._zones`): static, read when the detector
     #: and the target selector are built, never traced.
     zones: tuple[Zone, ...] = eqx.field(static=True, default=())
@@ -287,6 +294,39 @@ class Rig(eqx.Module):
         s = self.sigmas
         rig = (s.H_o, s.H_f, s.D_c, s.theta_c, s.r_m, s.H_p, s.R_h)
         return jnp.stack([s_r, s_t] + [jnp.broadcast_to(v, s_r.shape) for v in rig], axis=-1)
+
+
+def stack_ptzs(trees: Sequence) -> object:
+    """PyTrees of one structure (one-PTZ rigs, placements) stacked along a new leading axis; a
+    ``ValueError`` naming the difference otherwise (PTZs whose lens tables differ in length do not stack)."""
+    structures = {jax.tree.structure(t) for t in trees}
+    if len(structures) > 1:
+        raise ValueError("the PTZs differ in structure (lens tables of different lengths?); several PTZs are "
+                         "stacked only with lens tables of one length")
+    return jax.tree.map(lambda *v: jnp.stack(v), *trees)
+
+
+def with_ptz_count(rig: Rig, k: int) -> Rig:
+    """``rig`` with ``k`` PTZs: its first ``k``, and where it has fewer, copies of its first PTZ (lens,
+    limits, height, sigmas) spread evenly in azimuth around the omni axis, PTZ ``i`` at
+    ``theta_c + 360 deg * i / k`` and the first's floor distance ``D_c``, pulled in to 0.05 m inside
+    the room's outline along that azimuth where the wall is nearer. Their device profiles are the
+    command's (``None``). The demo's ``--ptz-count``."""
+    if not 1 <= k <= MAX_PTZS:
+        raise ValueError(f"a rig has 1 to {MAX_PTZS} PTZs, asked for {k}")
+    ptzs = [PTZ(foveal=rig.foveal, sigma_D_c=rig.sigmas.D_c, sigma_H_f=rig.sigmas.H_f,
+                sigma_theta_c=rig.sigmas.theta_c), *rig.more_ptzs][:k]
+    profiles = (tuple(rig.ptz_profiles) + (None,) * MAX_PTZS)[:k]
+    outline = np.asarray(rig.room.outline, float)
+    first = ptzs[0]
+    for i in range(len(ptzs), k):
+        azimuth = float(first.foveal.theta_c) + 2.0 * math.pi * i / k
+        wall = _wall_distance(outline, azimuth)
+        D_c = float(first.foveal.D_c) if wall is None else min(float(first.foveal.D_c), wall - 0.05)
+        foveal = eqx.tree_at(lambda f: (f.D_c, f.theta_c), first.foveal,
+                             (_a(max(D_c, 0.0)), _a(math.remainder(azimuth, 2.0 * math.pi))))
+        ptzs.append(eqx.tree_at(lambda p: p.foveal, first, foveal))
+    return dataclasses.replace(rig, more_ptzs=tuple(ptzs[1:]), ptz_profiles=profiles)
 
 
 # --------------------------------------------------------------------------------------

@@ -152,12 +152,13 @@ def _foveal_rows(scene, view: PTZView, state, row0, n_rows: int):
     return colour * bg.spectrum
 
 
-def render_foveal(world, t: int, pan, tilt, zoom, size: tuple[int, int] | None = None) -> UInt8[Array, "H W 3"]:
+def render_foveal(world, t: int, pan, tilt, zoom, size: tuple[int, int] | None = None,
+                  ptz: int = 0) -> UInt8[Array, "H W 3"]:
     """The foveal camera's 8-bit image of frame ``t`` at (``pan``, ``tilt``) rad and ``zoom``: the same
     room (furniture where it stands at ``t``), people and light as the omni frame, seen through a
-    pinhole at the true PTZ pose, with the scenario's sensor noise (one ray per pixel; for demos).
-    ``size`` (W, H) overrides the lens's."""
-    view = ptz_view(world.true_rig, pan, tilt, zoom, size)
+    pinhole at the true pose of PTZ ``ptz`` (the rig's order), with the scenario's sensor noise (one
+    ray per pixel; for demos). ``size`` (W, H) overrides the lens's."""
+    view = ptz_view(world.true_rig.ptz(ptz), pan, tilt, zoom, size)
     state = world.state(t)
     W, H = view.size
     rows = [_foveal_rows(world.scene, view, state, jnp.int32(r0), FOVEAL_BLOCK_ROWS)

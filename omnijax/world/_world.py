@@ -17,6 +17,8 @@ system under test only knows the configured rig.
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -41,10 +43,12 @@ WINDOW_GRID = 0.05
 
 @eqx.filter_jit
 def draw_true_rig(rig: Rig, key: Array) -> Rig:
-    """The world's true rig: H_o, r_m, H_f, D_c and theta_c drawn from N(configured value, sigma^2).
+    """The world's true rig: H_o, r_m, and each PTZ's H_f, D_c and theta_c drawn from N(configured
+    value, sigma^2) (the PTZs of ``rig.more_ptzs`` with their own sigmas).
 
     The usable image circle scales with r_m; D_c stays non-negative. Everything
-    else (image centre, lens, person priors, room) is as configured.
+    else (image centre, lens, person priors, room) is as configured. The first PTZ's draw does not
+    depend on how many more there are (their keys are folded from ``key``).
     """
     k = jax.random.split(key, 5)
     s = rig.sigmas
@@ -57,7 +61,14 @@ def draw_true_rig(rig: Rig, key: Array) -> Rig:
               draw(k[2], rig.foveal.H_f, s.H_f), jnp.abs(draw(k[3], rig.foveal.D_c, s.D_c)),
               draw(k[4], rig.foveal.theta_c, s.theta_c))
     where = lambda r: (r.omni.H_o, r.omni.r_m, r.omni.rim, r.foveal.H_f, r.foveal.D_c, r.foveal.theta_c)
-    return eqx.tree_at(where, rig, values)
+    more = []
+    for i, p in enumerate(rig.more_ptzs):
+        kp = jax.random.split(jax.random.fold_in(key, i + 1), 3)
+        fo = eqx.tree_at(lambda f: (f.H_f, f.D_c, f.theta_c), p.foveal,
+                         (draw(kp[0], p.foveal.H_f, p.sigma_H_f), jnp.abs(draw(kp[1], p.foveal.D_c, p.sigma_D_c)),
+                          draw(kp[2], p.foveal.theta_c, p.sigma_theta_c)))
+        more.append(eqx.tree_at(lambda q: q.foveal, p, fo))
+    return dataclasses.replace(eqx.tree_at(where, rig, values), more_ptzs=tuple(more))
 
 
 class Truth(eqx.Module):
