@@ -17,12 +17,23 @@ runs the real-time loop on it: detection, tracking, target choice, the head
 predicted to when the PTZ gets there, pan/tilt/zoom with the propagated
 uncertainty, and the commands written through the real driver to the emulator.
 
+--ptz-count K drives K PTZs (default: as many as the scenario's rig has, 1 for
+the shipped scenarios): the rig's own, and where it has fewer, copies of its
+first spread evenly in azimuth around the omni camera at the first's distance
+(pulled in to the wall). Each has its own emulator, its own rendered view and
+its own true (miscalibrated) placement; every frame the trusted people some PTZ
+can frame are assigned to the PTZs exactly (each PTZ's face size and
+containment probability for each person, its slew time, how long each person
+has gone uncaptured; hysteresis; spare PTZs give the weakest-framed person a
+second view: docs/site.md).
+
 Every processed frame is scored against the world's ground truth: detection
 misses and false alarms, the foot position error on the floor, and for each
 frame with a target whether the true head would be inside the PTZ frame for
 both zoom rules (the paper's and the calibrated one), and its width in pixels;
 the share of target-frames aimed at no person; per person the share of their
-time in view with their face framed (face coverage); and the frames with
+time in view with their face framed by some PTZ (face coverage); per PTZ its
+target-frames, the share framed and its hand-offs (cameras); and the frames with
 someone in view but no target, by reason (tracks not yet trusted, tracks the
 PTZ cannot frame at p_contain, no track).
 
@@ -49,8 +60,8 @@ exit code 130. Once the loop runs, they end it and everything is written.
 
 --faults injects faults while running, e.g.
   broken@300,wrong-size@350,ptz-unplug@400:2,end@900
-(a broken frame, a frame of the wrong size, the PTZ port vanishing for 2 s and
-returning, the source ending early); the summary counts each.
+(a broken frame, a frame of the wrong size, the (first) PTZ's port vanishing for
+2 s and returning, the source ending early); the summary counts each.
 """
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "three_people.toml"
@@ -70,6 +81,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pace", choices=PACES, default="live",
                    help="live: frames arrive at the scenario's rate, late ones are dropped (default); "
                         "all: every frame is processed, as fast as possible")
+    p.add_argument("--ptz-count", type=int, metavar="K",
+                   help="PTZs to drive, each with its own emulator (default: the scenario rig's; where the rig has "
+                        "fewer, copies of its first spread evenly in azimuth)")
     p.add_argument("--protocol", choices=EMULATED, default="visca", metavar="NAME",
                    help="protocol of the emulated PTZ: %(choices)s (default visca; visca-ip: VISCA over IP, "
                         "through the UDP stack; onvif: ONVIF, SOAP over HTTP on localhost)")
@@ -83,17 +97,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 class FovealInset:
-    """The foveal view for the operator's view: rendered from the world at the emulated PTZ's
-    actual position (its state file), every ``every`` frames."""
+    """The foveal view of PTZ ``ptz`` (the rig's order) for the operator's view: rendered from the world
+    at its emulator's actual position (its state file), every ``every`` frames."""
 
-    def __init__(self, world, emulator, every: int, size=(192, 144)):
-        self.world, self.emulator, self.every, self.size = world, emulator, every, size
-        self.image, self.label, self.n = None, "PTZ (offline)", 0
+    def __init__(self, world, emulator, every: int, size=(192, 144), ptz: int = 0):
+        self.world, self.emulator, self.every, self.size, self.ptz = world, emulator, every, size, ptz
+        self.name = "PTZ" if world.rig.ptz_count == 1 else f"PTZ {ptz}"
+        self.image, self.label, self.n = None, f"{self.name} (offline)", 0
 
     def warm_up(self) -> None:
         from omnijax.world import render_foveal
 
-        render_foveal(self.world, 0, 0.0, 0.0, 1.0, self.size).block_until_ready()
+        render_foveal(self.world, 0, 0.0, 0.0, 1.0, self.size, self.ptz).block_until_ready()
 
     def __call__(self, frame, loop):
         import numpy as np
@@ -106,11 +121,11 @@ class FovealInset:
                 g = state["geometry"]
                 pan, tilt, zoom = math.radians(g["pan_deg"]), math.radians(g["tilt_deg"]), state["zoom"]
                 t = min(frame.index, self.world.n_frames - 1)
-                self.image = np.asarray(render_foveal(self.world, t, pan, tilt, zoom, self.size))
+                self.image = np.asarray(render_foveal(self.world, t, pan, tilt, zoom, self.size, self.ptz))
                 moving = " moving" if state.get("moving") else ""
-                self.label = f"PTZ  pan {g['pan_deg']:6.1f}  tilt {g['tilt_deg']:5.1f}  x{zoom:4.1f}{moving}"
+                self.label = f"{self.name}  pan {g['pan_deg']:6.1f}  tilt {g['tilt_deg']:5.1f}  x{zoom:4.1f}{moving}"
             else:
-                self.image, self.label = None, "PTZ  port down"
+                self.image, self.label = None, f"{self.name}  port down"
         self.n += 1
         return self.image, self.label
 
@@ -137,9 +152,16 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--screenshot: expected a processed frame number >= 1, got {args.screenshot}")
     if args.seed is not None and args.seed < 0:
         raise UsageError(f"--seed: expected an integer >= 0, got {args.seed}")
+    from omnijax.config import MAX_PTZS
+
+    if args.ptz_count is not None and not 1 <= args.ptz_count <= MAX_PTZS:
+        raise UsageError(f"--ptz-count: expected 1 to {MAX_PTZS} PTZs, got {args.ptz_count}")
     plan = parse_faults(args.faults)
     scenario = scenario_file(args.scenario)
 
+    import contextlib
+
+    from omnijax.config import with_ptz_count
     from omnijax.world import build_world
     from runtime.files import load_scenario, scenario_rig_path
     from runtime.ptz import PtzError, make_driver
@@ -147,11 +169,14 @@ def run(args: argparse.Namespace) -> int:
     from runtime.ptz.profile import DEFAULT_PROFILES
     from runtime.ptz.transports import EMULATED
     from runtime.realtime.perception import learning_step
+    from runtime.realtime.ptz_link import PtzLink
     from runtime.realtime.session import run_session
     from runtime.realtime.sources import FaultySource, SyntheticSource
     from runtime.validation.scoring import DemoScorer
 
     rig, sc = load_scenario(scenario)
+    K = args.ptz_count or rig.ptz_count
+    rig = with_ptz_count(rig, K)
     n_bg, seconds = background_settings(args, rig)
     n_learn = (n_bg - 1) * learning_step(sc.fps, n_bg, seconds) + 1
     if args.frames < n_learn + 20:
@@ -170,13 +195,18 @@ def run(args: argparse.Namespace) -> int:
             source = FaultySource(synthetic, plan) if not plan.empty else synthetic
             scorer = DemoScorer(world, synthetic)
         profile = load_ptz_profile(None, EMULATED[args.protocol])
-        # the emulator is stopped when this block is left in any way, and stops by itself if this process dies
-        with interrupted_during("during start-up"), EmulatorProcess(args.protocol) as emulator:
-            driver = make_driver(emulator.url, profile)
-            try:
-                driver.connect(timeout=30)  # ONVIF: the first connect parses the WSDLs (seconds on a busy machine)
-            except PtzError as exc:
-                raise RuntimeError(f"the PTZ emulator did not answer: {exc}") from None
+        # the emulators are stopped when this block is left in any way, and stop by themselves if this process dies
+        with interrupted_during("during start-up"), contextlib.ExitStack() as stack:
+            emulators = [stack.enter_context(EmulatorProcess(args.protocol)) for _ in range(K)]
+            drivers = []
+            for emulator in emulators:
+                driver = make_driver(emulator.url, profile)
+                stack.callback(driver.disconnect)
+                try:
+                    driver.connect(timeout=30)  # ONVIF: the first connect parses the WSDLs (seconds on a busy machine)
+                except PtzError as exc:
+                    raise RuntimeError(f"the PTZ emulator did not answer: {exc}") from None
+                drivers.append(driver)
 
             unplugs = dict(plan.ptz_unplug)
 
@@ -184,29 +214,31 @@ def run(args: argparse.Namespace) -> int:
                 due = [k for k in unplugs if k <= frame.index]  # the frame itself may have been dropped
                 if due:
                     seconds = unplugs.pop(min(due))
-                    emulator.unplug(seconds)
+                    emulators[0].unplug(seconds)
                     return {"fault": f"PTZ port unplugged for {seconds:g} s"}
                 return {}
 
             def finish(summary):
-                summary.update(scorer.summary(float(rig.p_contain), args.zoom_rule))
+                scores = scorer.summary(float(rig.p_contain), args.zoom_rule)
+                scores["cameras"] = [{**run, **score, "emulator": emulator.state()} for run, score, emulator in
+                                     zip(summary["cameras"], scores["cameras"], emulators)]
+                summary.update(scores)
                 summary["scenario"] = {"file": str(scenario), "name": sc.name, "frames": args.frames,
-                                       "seed": world.seed, "fps": sc.fps, "pace": args.pace}
+                                       "seed": world.seed, "fps": sc.fps, "pace": args.pace, "ptz_count": K}
                 summary["faults"]["injected"] = plan.describe()
-                summary["faults"]["ptz_unplugged"] = emulator.unplugs
-                summary["emulator"] = emulator.state()
+                summary["faults"]["ptz_unplugged"] = emulators[0].unplugs
+                summary["emulator"] = emulators[0].state()
 
-            print(f"omnijax demo: PTZ emulator ({profile.name}) on {emulator.pty}; learning the background, "
-                  "compiling ...", file=sys.stderr, flush=True)
-            try:
-                summary = run_session(
-                    rig, source, Path(args.out), driver=driver, profile=profile, config=config,
-                    paced=args.pace == "live", background_frames=n_bg, background_seconds=seconds,
-                    video=not args.no_video, record=args.record, title=f"OMNI 1  {sc.name}",
-                    foveal=FovealInset(world, emulator, args.inset_every), hooks=(scorer,), control_hooks=(unplug,),
-                    finish=finish, screenshot_at=args.screenshot, console=console, mqtt=mqtt)
-            finally:
-                driver.disconnect()
+            where = ", ".join(emulator.pty for emulator in emulators)
+            print(f"omnijax demo: {K} PTZ emulator{'s' if K > 1 else ''} ({profile.name}) on {where}; learning the "
+                  "background, compiling ...", file=sys.stderr, flush=True)
+            summary = run_session(
+                rig, source, Path(args.out), links=[PtzLink(k, d, profile) for k, d in enumerate(drivers)],
+                config=config, paced=args.pace == "live", background_frames=n_bg, background_seconds=seconds,
+                video=not args.no_video, record=args.record, title=f"OMNI 1  {sc.name}",
+                fovea=[FovealInset(world, emulator, args.inset_every, ptz=k) for k, emulator in enumerate(emulators)],
+                hooks=(scorer,), control_hooks=(unplug,), finish=finish, screenshot_at=args.screenshot,
+                console=console, mqtt=mqtt)
     _report(summary, args.out)
     return 0
 
@@ -235,6 +267,13 @@ def _report(s: dict, out) -> None:
     p = s["ptz"]
     print(f"  PTZ: {p['commands']} commands, {p['errors']} errors, {p['reconnects']} reconnects; "
           f"faults: {s['faults']['broken_frames']} broken, {s['faults']['wrong_size_frames']} wrong size")
+    cams = s.get("cameras") or []
+    if len(cams) > 1:
+        for cam in cams:
+            fr = cam["framed_rate"]
+            print(f"  PTZ {cam['id']}: head in frame {fr if fr is not None else float('nan'):.4f} of its "
+                  f"{cam['target_frames']} target-frames, {cam['handoffs']} hand-offs taken, "
+                  f"{cam['handed_over']} given")
     o = s["outputs"]
     written = ["summary.json", "log.jsonl", *(o[k] for k in ("video", "record", "view") if k in o)]
     print(f"demo outputs: {out}/ ({', '.join(written)})")

@@ -31,7 +31,14 @@ and the command written to the PTZ unless it is inside the dead zone.
 --ptz is a pyserial URL (/dev/ttyUSB0, socket://host:port, or the path printed by
 `omnijax ptz-emulator`), visca-udp://HOST[:PORT] (VISCA over IP) or
 onvif://[USER:PASSWORD@]HOST[:PORT] (ONVIF; the password is never printed or
-logged); without it commands are computed and logged only.
+logged); without it commands are computed and logged only. A rig with several
+PTZs ([[foveal]] tables) takes one --ptz per PTZ, in the rig's order; each PTZ's
+device profile is its table's `profile`, else --ptz-profile, else the shipped
+one of its protocol. Every frame the trusted people some PTZ can frame are
+assigned to the PTZs exactly (face size and containment probability per PTZ
+and person, slew time, how long each person has gone uncaptured; hysteresis;
+hand-offs; a spare PTZ gives the weakest-framed person a second view:
+docs/site.md).
 Ctrl-C or SIGTERM: the PTZ goes home, the summary is written, nothing is lost.
 
 Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line per frame),
@@ -54,19 +61,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("source", metavar="SOURCE", help="camera index, stream URL, video file or folder of images")
     p.add_argument("--config", required=True, metavar="FILE", help="rig TOML file")
-    p.add_argument("--ptz", metavar="URL",
+    p.add_argument("--ptz", metavar="URL", action="append",
                    help="PTZ camera: pyserial URL, visca-udp://HOST[:PORT] or onvif://[USER:PASSWORD@]HOST[:PORT]; "
-                        "none: commands are only logged")
-    add_ptz_profile_option(p, "PTZ device profile: TOML file or a name in configs/devices "
-                              "(default sony_evi_d70; onvif_ptz for onvif://)")
+                        "once per PTZ of the rig, in its order; none: commands are only logged")
+    add_ptz_profile_option(p, "PTZ device profile: TOML file or a name in configs/devices, for the PTZs whose "
+                              "[[foveal]] table names none (default sony_evi_d70; onvif_ptz for onvif://)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created)")
     p.add_argument("--pace", choices=PACES,
                    help="live: frames at the source's rate, late ones dropped; all: every frame as fast as "
                         "possible (default: live for cameras and videos, all for image folders)")
     p.add_argument("--fps", type=finite_float, metavar="F", help="frame rate of an image folder")
-    p.add_argument("--ptz-video", metavar="SOURCE",
+    p.add_argument("--ptz-video", metavar="SOURCE", action="append",
                    help="the PTZ camera's own video (stream URL, camera index or file): shown in the operator's view "
-                        "and the console, and saved as the face when one is captured (default: none)")
+                        "and the console, and saved as the face when one is captured (default: none); with several "
+                        "PTZs, once per PTZ in the rig's order (or fewer: the first ones)")
     add_background_options(p)
     add_loop_options(p)
     p.set_defaults(func=run)
@@ -76,7 +84,6 @@ def run(args: argparse.Namespace) -> int:
     from runtime.cli._options import (
         background_settings,
         console_and_events,
-        load_ptz_profile,
         loop_config,
         parse_faults,
     )
@@ -95,7 +102,14 @@ def run(args: argparse.Namespace) -> int:
 
     rig = load_rig(args.config)
     args.background_frames, args.background_seconds = background_settings(args, rig)
-    profile = load_ptz_profile(args.ptz_profile, required_protocol(args.ptz) if args.ptz else None)
+    urls, videos = args.ptz or [], args.ptz_video or []
+    if urls and len(urls) != rig.ptz_count:
+        raise UsageError(f"--ptz: {args.config} has {rig.ptz_count} PTZ{'s' if rig.ptz_count > 1 else ''}; expected "
+                         f"one --ptz URL for each, in the rig's order, got {len(urls)}")
+    if len(videos) > rig.ptz_count:
+        raise UsageError(f"--ptz-video: expected at most one per PTZ ({rig.ptz_count}), got {len(videos)}")
+    profiles = [ptz_profile(args, rig, k, required_protocol(urls[k]) if urls else None) for k in range(rig.ptz_count)]
+    profile = profiles[0]
     with console_and_events(args, Path(args.config), args.ptz_profile or DEFAULT_PROFILES[profile.protocol]) as (
             console, mqtt):
         try:
@@ -105,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
         if not plan.empty:
             source = FaultySource(source, plan)
         pace = args.pace or ("all" if isinstance(source, FolderSource) and args.fps is None else "live")
-        summary = _run(args, rig, source, profile, config, plan, pace, console, mqtt)
+        summary = _run(args, rig, source, profiles, config, plan, pace, console, mqtt)
     lat, p = summary["latency_ms"], summary["ptz"]
     print(f"{summary['frames']} frames at {summary['fps']:.1f} fps ({summary['stop_reason']}); latency p50 "
           f"{lat['p50'] or float('nan'):.2f} ms, p99 {lat['p99'] or float('nan'):.2f} ms; "
@@ -116,44 +130,67 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run(args, rig, source, profile, config, plan, pace, console, mqtt) -> dict:
-    """Connect the PTZ and run the session (the console, if any, serving meanwhile); its summary."""
+def ptz_profile(args, rig, k: int, protocol: str | None):
+    """PTZ ``k``'s device profile: its ``[[foveal]]`` table's ``profile`` (a file relative to the rig, or a
+    shipped name), else ``--ptz-profile``, else the shipped one of ``protocol``."""
+    from runtime.cli._options import load_ptz_profile
+    from runtime.errors import UsageError
+    from runtime.ptz import ProfileError, load_profile
+
+    named = rig.ptz_profiles[k] if k < len(rig.ptz_profiles) else None
+    if named is None:
+        return load_ptz_profile(args.ptz_profile, protocol)
+    beside = Path(args.config).parent / named
+    try:
+        profile = load_profile(beside if beside.is_file() else named)
+    except ProfileError as exc:
+        raise UsageError(f"{args.config}: foveal.{k}.profile: {exc}") from None
+    if protocol is not None and profile.protocol != protocol:
+        raise UsageError(f"{args.config}: foveal.{k}.profile: {named} is a {profile.protocol} profile, but its "
+                         f"--ptz URL speaks {protocol}")
+    return profile
+
+
+def _run(args, rig, source, profiles, config, plan, pace, console, mqtt) -> dict:
+    """Connect the PTZs and run the session (the console, if any, serving meanwhile); its summary."""
     from runtime.errors import UsageError
     from runtime.frames import SourceError, open_source
     from runtime.ptz import PtzError, make_driver
     from runtime.ptz.onvif import redact
+    from runtime.realtime.ptz_link import PtzLink
     from runtime.realtime.session import run_session
     from runtime.realtime.sources import LatestImage
 
-    driver = None
-    if args.ptz:
+    urls = args.ptz or []
+    with contextlib.ExitStack() as stack:
+        drivers, fovea = [None] * rig.ptz_count, []
         try:
-            driver = make_driver(args.ptz, profile)
-            driver.connect(timeout=30 if args.ptz.lower().startswith("onvif://") else 5)  # ONVIF: WSDLs parsed first
-        except PtzError as exc:
-            source.close()
-            raise UsageError(f"--ptz: {exc}") from None
-    ptz_view = contextlib.nullcontext()
-    if args.ptz_video:
+            for k, url in enumerate(urls):
+                try:
+                    drivers[k] = make_driver(url, profiles[k])
+                    stack.callback(drivers[k].disconnect)
+                    drivers[k].connect(timeout=30 if url.lower().startswith("onvif://") else 5)  # ONVIF: WSDLs first
+                except PtzError as exc:
+                    which = f" ({k + 1} of {len(urls)})" if len(urls) > 1 else ""
+                    raise UsageError(f"--ptz{which}: {exc}") from None
+            for k, video in enumerate(args.ptz_video or []):
+                label = "PTZ camera" if rig.ptz_count == 1 else f"PTZ {k} camera"
+                try:
+                    fovea.append(stack.enter_context(LatestImage(open_source(video), label)))
+                except SourceError as exc:
+                    raise UsageError(f"--ptz-video: {exc}") from None
+        except UsageError:
+            source.close()  # the session closes it otherwise
+            raise
         try:
-            ptz_view = LatestImage(open_source(args.ptz_video))
-        except SourceError as exc:
-            source.close()
-            if driver is not None:
-                driver.disconnect()
-            raise UsageError(f"--ptz-video: {exc}") from None
-    try:
-        with ptz_view as foveal:
-            return run_session(rig, source, Path(args.out), driver=driver, profile=profile, config=config,
-                               paced=pace == "live", background_frames=args.background_frames,
+            return run_session(rig, source, Path(args.out),
+                               links=[PtzLink(k, d, p) for k, (d, p) in enumerate(zip(drivers, profiles))],
+                               config=config, paced=pace == "live", background_frames=args.background_frames,
                                background_seconds=args.background_seconds, video=not args.no_video,
-                               record=args.record,
-                               title=f"OMNI  {Path(str(args.source)).name}", foveal=foveal,
+                               record=args.record, title=f"OMNI  {Path(str(args.source)).name}", fovea=fovea,
                                extra={"config_file": str(args.config),
-                                      "ptz_url": redact(args.ptz) if args.ptz else None, "pace": pace,
+                                      "ptz_url": redact(urls[0]) if urls else None,
+                                      "ptz_urls": [redact(u) for u in urls], "pace": pace,
                                       "faults_injected": plan.describe()}, console=console, mqtt=mqtt)
-    except SourceError as exc:
-        raise UsageError(str(exc)) from None
-    finally:
-        if driver is not None:
-            driver.disconnect()
+        except SourceError as exc:
+            raise UsageError(str(exc)) from None

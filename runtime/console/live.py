@@ -25,13 +25,21 @@ RECENT_EVENTS = 50
 @dataclass(frozen=True)
 class Snapshot:
     """One processed frame as the console shows it: the ``status`` JSON object, the annotated omni image
-    and the PTZ's image (RGB; ``None`` before the first or without a PTZ view) with its label."""
+    and each PTZ's image (RGB; ``None`` before the first or without a PTZ view) with its label, in the
+    rig's order (``views``); ``ptz``, ``ptz_label``: the first PTZ's."""
 
     status: dict
     omni: np.ndarray | None
-    ptz: np.ndarray | None
-    ptz_label: str
+    views: tuple[tuple[np.ndarray | None, str], ...]
     index: int
+
+    @property
+    def ptz(self) -> np.ndarray | None:
+        return self.views[0][0]
+
+    @property
+    def ptz_label(self) -> str:
+        return self.views[0][1]
 
 
 def _deg(v: float | None, nd: int = 3) -> float | None:
@@ -68,7 +76,7 @@ class LiveView:
             xy[k] = tr.position
         return np.asarray(floor_to_pixels(self.rig, jnp.asarray(xy), jnp.zeros(MAX_TRACKS)))
 
-    def __call__(self, record, frame, dets, z, tracks, command, status) -> dict:
+    def __call__(self, record, frame, dets, z, tracks, commands, status) -> dict:
         loop, annot = self.loop, self.annotator
         px = self._pixels(tracks)
         framable = set(status.get("framable") or ())
@@ -77,15 +85,12 @@ class LiveView:
         lat = lat[np.isfinite(lat)]
         op = status.get("operator")
         now = time.monotonic()
-        sent = status.get("sent")
-        ptz = {"pan_deg": _deg(sent[0]) if sent else None, "tilt_deg": _deg(sent[1]) if sent else None,
-               "zoom": round(sent[2], 3) if sent else None, "zoom_rule": loop.cfg.zoom_rule,
-               "p_contain": float(self.rig.p_contain), "link": status["driver"]}
-        if command is not None:
-            ptz.update({"sd_pan_deg": _deg(command.sd_pan, 4), "sd_tilt_deg": _deg(command.sd_tilt, 4),
-                        "zooms": {k: round(v, 3) for k, v in command.zooms.items()},
-                        "probability": (None if command.aimed is None else
-                                        round(float(command.aimed.zooms[loop.cfg.zoom_rule].probability), 4))})
+        views = ((None, "PTZ"),) * len(commands) if annot is None else tuple(annot.insets)
+        cameras = [{"id": k, "target": None if command is None else command.track,
+                    "manual": command is not None and command.track is None, "held": camera["held"],
+                    "view": views[k][1], **self._ptz(camera, command)}
+                   for k, (command, camera) in enumerate(zip(commands, status["cameras"]))]
+        command = commands[0]
         counts = status["counts"]
         out = {
             "frames": n, "frame": int(frame.index), "t": round(float(frame.stamp), 3),
@@ -99,18 +104,34 @@ class LiveView:
             "target": None if command is None else command.track,
             "manual": command is not None and command.track is None,
             "held": status.get("held"),
-            "ptz": ptz,
+            "ptz": self._ptz(status["cameras"][0], command),
+            "cameras": cameras,
             "operator": None if op is None else {
                 "target": op.target, "paused": op.paused,
                 "point": None if op.pointing(now) is None else {
                     "pan_deg": _deg(op.point[0]), "tilt_deg": _deg(op.point[1]), "zoom": round(op.point[2], 3),
-                    "remaining_s": round(op.point_until - now, 1)}},
+                    "remaining_s": round(op.point_until - now, 1), "camera": op.point_camera}},
             "faces_captured": status["captures"],
             "faults": {"broken": counts["broken"], "wrong_size": counts["wrong_size"],
                        "stale": status["capture"]["stale"], "dropped": status["capture"]["dropped"],
-                       "ptz_offline": status["driver"] is not None and not status["driver"]["connected"]},
+                       "ptz_offline": any(c["driver"] is not None and not c["driver"]["connected"]
+                                          for c in status["cameras"])},
             "zones_version": status.get("zones_version", 0),
         }
-        omni, (inset, label) = (None, (None, "PTZ")) if annot is None else (annot.omni_view, annot.inset)
-        self.snapshot = Snapshot(status=out, omni=omni, ptz=inset, ptz_label=label, index=int(frame.index))
+        omni = None if annot is None else annot.omni_view
+        self.snapshot = Snapshot(status=out, omni=omni, views=views, index=int(frame.index))
         return {}
+
+    def _ptz(self, camera: dict, command) -> dict:
+        """A PTZ's part of the status: where it was sent last, its link, and this frame's command's sigmas,
+        zooms and predicted containment."""
+        sent, rule = camera["sent"], self.loop.cfg.zoom_rule
+        ptz = {"pan_deg": _deg(sent[0]) if sent else None, "tilt_deg": _deg(sent[1]) if sent else None,
+               "zoom": round(sent[2], 3) if sent else None, "zoom_rule": rule,
+               "p_contain": float(self.rig.p_contain), "link": camera["driver"]}
+        if command is not None:
+            ptz.update({"sd_pan_deg": _deg(command.sd_pan, 4), "sd_tilt_deg": _deg(command.sd_tilt, 4),
+                        "zooms": {k: round(v, 3) for k, v in command.zooms.items()},
+                        "probability": (None if command.aimed is None else
+                                        round(float(command.aimed.zooms[rule].probability), 4))})
+        return ptz

@@ -157,11 +157,12 @@ class Console:
 
     def _pointing_sent(self) -> bool:
         """Whether the latest frame the drawing thread saw had the operator's manual pointing sent."""
-        point = self.operator.state.pointing(time.monotonic())
+        st = self.operator.state
+        point = st.pointing(time.monotonic())
         snap = self.live.snapshot if self.live is not None else None
         if point is None or snap is None:
             return point is None
-        sent = _sent(snap)
+        sent = _sent(snap, st.point_camera)
         return sent is not None and all(abs(a - b) < 1e-4 for a, b in zip(sent[:2], point[:2])) \
             and abs(sent[2] - point[2]) < 1e-3
 
@@ -259,10 +260,13 @@ class Console:
 
     async def _view(self, request):
         which = request.match_info["which"]
-        if which not in ("omni", "ptz"):
-            raise ApiError(404, f"no such view: {which} (omni, ptz)")
+        count = self.rig.ptz_count if self.rig is not None else 1
+        views = ("omni", "ptz", *(f"ptz{k}" for k in range(count)))
+        if which not in views:
+            raise ApiError(404, f"no such view: {which} ({', '.join(views)})")
         snap = self.live.snapshot if self.live is not None else None
-        image = None if snap is None else snap.omni if which == "omni" else snap.ptz
+        k = 0 if which == "ptz" else int(which[3:]) if which != "omni" else None
+        image = None if snap is None else snap.omni if k is None else snap.views[k][0]
         if image is None:
             raise ApiError(404, f"no {which} image yet")
         cached = self._jpeg_cache.get(which)
@@ -310,6 +314,14 @@ class Console:
             raise ApiError(400, f"seconds: expected a number in (0, {MAX_MANUAL_S:g}], got {seconds!r}")
         return float(seconds)
 
+    def _camera(self, body) -> int:
+        """The PTZ a request is for (``camera``, the rig's order; default the first)."""
+        k = body.get("camera", 0)
+        count = self.rig.ptz_count
+        if not isinstance(k, int) or isinstance(k, bool) or not 0 <= k < count:
+            raise ApiError(400, f"camera: expected a PTZ number 0 to {count - 1}, got {k!r}")
+        return k
+
     def _number(self, body, key, default=None) -> float:
         v = body.get(key, default)
         if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
@@ -320,47 +332,49 @@ class Console:
         body = await self._body(request)
         self._running()
         x, y = self._number(body, "x"), self._number(body, "y")
-        seconds = self._seconds(body)
+        seconds, camera = self._seconds(body), self._camera(body)
         W, H = self.rig.omni.image_size
         if not (0 <= x <= W and 0 <= y <= H):
             raise ApiError(400, f"x, y: ({x:g}, {y:g}) lies outside the {W}x{H} omni image")
-        aim = await asyncio.get_running_loop().run_in_executor(None, _aim_at_pixel, self.rig,
+        aim = await asyncio.get_running_loop().run_in_executor(None, _aim_at_pixel, self.rig.ptz(camera),
                                                                self.loop.cfg.zoom_rule, x, y)
         if aim is None:
             raise ApiError(422, f"({x:g}, {y:g}) is not a floor point the PTZ can aim at (beyond the floor's "
                                 "horizon, or at the PTZ's foot)")
-        st = self.operator.point(*aim, seconds=seconds)
+        st = self.operator.point(*aim, seconds=seconds, camera=camera)
         return web.json_response(self._pointing(st))
 
     @staticmethod
     def _pointing(st) -> dict:
         pan, tilt, zoom = st.point
         return {"pan_deg": round(math.degrees(pan), 3), "tilt_deg": round(math.degrees(tilt), 3),
-                "zoom": round(zoom, 3), "until": st.point_until, "version": st.version}
+                "zoom": round(zoom, 3), "until": st.point_until, "camera": st.point_camera, "version": st.version}
 
     async def _ptz(self, request):
         """Absolute (``pan_deg``, ``tilt_deg``, ``zoom``) or relative (``dpan_deg``, ``dtilt_deg``, ``zoom_factor``)
         to where the PTZ was sent last: the calibration assistant's keys."""
         body = await self._body(request)
         snap = self._running()
-        known = {"pan_deg", "tilt_deg", "zoom", "dpan_deg", "dtilt_deg", "zoom_factor", "seconds"}
+        known = {"pan_deg", "tilt_deg", "zoom", "dpan_deg", "dtilt_deg", "zoom_factor", "seconds", "camera"}
         if not body or set(body) - known:
             raise ApiError(400, f"expected some of {sorted(known)}, got {sorted(body)}")
+        camera = self._camera(body)
         st = self.operator.state
-        cur = st.pointing(time.monotonic()) or _sent(snap) or self.loop.cfg.home
+        held = st.pointing(time.monotonic()) if st.point_camera == camera else None
+        cur = held or _sent(snap, camera) or self.loop.cfg.home
         pan = math.radians(self._number(body, "pan_deg")) if "pan_deg" in body else cur[0]
         tilt = math.radians(self._number(body, "tilt_deg")) if "tilt_deg" in body else cur[1]
         zoom = self._number(body, "zoom") if "zoom" in body else cur[2]
         pan += math.radians(self._number(body, "dpan_deg", 0.0))
         tilt += math.radians(self._number(body, "dtilt_deg", 0.0))
         zoom *= self._number(body, "zoom_factor", 1.0)
-        lens = self.rig.foveal.lens
-        zoom = min(max(zoom, float(lens.zoom_range[0])), float(lens.zoom_range[1]))
-        lo, hi = np.asarray(self.rig.foveal.tilt_limits)
+        foveal = self.rig.ptz(camera).foveal
+        zoom = min(max(zoom, float(foveal.lens.zoom_range[0])), float(foveal.lens.zoom_range[1]))
+        lo, hi = np.asarray(foveal.tilt_limits)
         tilt = min(max(tilt, float(lo)), float(hi))
         pan = math.remainder(pan, 2 * math.pi)
         try:
-            st = self.operator.point(pan, tilt, zoom, seconds=self._seconds(body))
+            st = self.operator.point(pan, tilt, zoom, seconds=self._seconds(body), camera=camera)
         except ValueError as exc:
             raise ApiError(400, str(exc)) from None
         return web.json_response(self._pointing(st))
@@ -380,7 +394,7 @@ class Console:
     async def _home(self, request):
         self._running()
         body = await self._body(request) if request.can_read_body else {}
-        st = self.operator.point(*self.loop.cfg.home, seconds=self._seconds(body))
+        st = self.operator.point(*self.loop.cfg.home, seconds=self._seconds(body), camera=self._camera(body))
         return web.json_response(self._pointing(st))
 
     # -- zones ----------------------------------------------------------------------------
@@ -461,8 +475,9 @@ class Console:
         return web.json_response(self.calibration.report())
 
 
-def _sent(snap) -> tuple[float, float, float] | None:
-    p = snap.status["ptz"]
+def _sent(snap, camera: int = 0) -> tuple[float, float, float] | None:
+    """Where PTZ ``camera`` was sent last, as the latest snapshot has it."""
+    p = snap.status["cameras"][camera]
     if p is None or p["pan_deg"] is None:
         return None
     return math.radians(p["pan_deg"]), math.radians(p["tilt_deg"]), p["zoom"]

@@ -5,8 +5,9 @@ the tracks confirmed at each frame with the ones before and writes an event when
 
 - ``person_appeared``: a track is trusted as a person for the first time
   (:func:`runtime.realtime.targeting.is_trusted`: it walked in; blobs that never move make no events);
-- ``face_captured``: the PTZ has dwelt on the person (the target selector marks the face captured);
-  the PTZ's image then (the demo's rendered view, or the camera's own stream) is saved as
+- ``face_captured``: a PTZ has dwelt on the person (the target selector, or with several PTZs the
+  assignment, marks the face captured); that PTZ's image then (the demo's rendered view, or the
+  camera's own stream) is saved as
   ``faces/track<ID>_frame<N>.jpg`` beside the log and named in the event (``face``);
 - ``person_left``: an appeared person's track has not been confirmed for ``leave_s`` seconds of frames.
 
@@ -36,10 +37,11 @@ RECENT_FACES = 8
 class EventLog:
     """Writes ``events.jsonl`` (and ``faces/``) into ``folder``; see the module docstring.
 
-    ``face_image() -> RGB array | None``: the PTZ's current image; ``sinks``: callables taking each event.
+    ``face_image(track) -> RGB array | None``: the current image of the PTZ that captured ``track``'s face;
+    ``sinks``: callables taking each event.
     """
 
-    def __init__(self, folder: Path, face_image: Callable[[], np.ndarray | None] | None = None,
+    def __init__(self, folder: Path, face_image: Callable[..., np.ndarray | None] | None = None,
                  sinks: tuple[Callable[[dict], None], ...] = (), leave_s: float = LEAVE_S):
         self.folder, self.face_image, self.sinks, self.leave_s = Path(folder), face_image, list(sinks), leave_s
         self.path = self.folder / "events.jsonl"
@@ -49,7 +51,7 @@ class EventLog:
         self.counts = dict.fromkeys(EVENTS, 0)
         self.faces: deque[tuple[dict, bytes]] = deque(maxlen=RECENT_FACES)  # (event, JPEG)
 
-    def __call__(self, record, frame, dets, z, tracks, command, status) -> dict:
+    def __call__(self, record, frame, dets, z, tracks, commands, status) -> dict:
         t = float(frame.stamp)
         for tr in tracks:
             xy = [round(float(v), 3) for v in tr.position]
@@ -60,15 +62,16 @@ class EventLog:
                 self._emit("person_appeared", tr.id, xy, frame)
             if tr.captured and tr.id not in self.captured:
                 self.captured.add(tr.id)
-                self._face(tr.id, xy, frame)
+                self._face(tr, xy, frame)
         for track, (seen, xy) in list(self.present.items()):
             if t - seen > self.leave_s:
                 del self.present[track]
                 self._emit("person_left", track, xy, frame)
         return {}
 
-    def _face(self, track: int, xy: list[float], frame) -> None:
-        image = self.face_image() if self.face_image is not None else None
+    def _face(self, tr, xy: list[float], frame) -> None:
+        track = tr.id
+        image = self.face_image(tr) if self.face_image is not None else None
         extra, jpeg = {"face": None}, None
         if image is not None:
             ok, buf = cv2.imencode(".jpg", cv2.cvtColor(np.asarray(image), cv2.COLOR_RGB2BGR),

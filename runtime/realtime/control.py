@@ -6,16 +6,17 @@
    and the aim pipeline's :func:`~omnijax.aiming.floor_from_detections`);
 2. the tracker's arithmetic over its slots (:func:`runtime.realtime.kalman.step`: prediction,
    gated costs, the assignment, the update);
-3. for every track confirmed after this frame (at most ``max_people``, since a confirmed track was
-   just matched), the aim pipeline (:func:`~omnijax.aiming.aim_at_floor`, vmapped): the head
-   predicted to when the PTZ's pan and tilt get there from the last command (their slew time
-   from the pan/tilt of a first aim at the track as it is now; the zoom keeps adjusting
-   meanwhile and does not lengthen the horizon), pan/tilt, their covariance and the zoom of
-   every rule.
+3. for every PTZ of the rig and every track confirmed after this frame (at most ``max_people``,
+   since a confirmed track was just matched), the aim pipeline (:func:`~omnijax.aiming.aim_at_floor`,
+   vmapped over the tracks and over the PTZs' stacked one-PTZ rigs, :meth:`~omnijax.Rig.ptz_stack`):
+   the head predicted to when that PTZ's pan and tilt get there from its last command (their slew
+   time from the pan/tilt of a first aim at the track as it is now; the zoom keeps adjusting
+   meanwhile and does not lengthen the horizon), pan/tilt, their covariance, the zoom of every rule
+   and the face's width in pixels at that zoom.
 
 The host then does the bookkeeping (:meth:`~runtime.realtime.tracker.Tracker.apply`), asks the
-target selector which track to look at (a plain call, its rules are its own) and takes that
-track's aim: no second aim call whichever track it picks.
+target selector (one PTZ) or the assignment (several, :mod:`runtime.realtime.assignment`) which
+track each PTZ looks at, and takes those (PTZ, track) aims: no second aim call whichever it picks.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ import jax.numpy as jnp
 
 from omnijax import Aim, Detector, Rig, aim_at_floor, detect, floor_from_detections
 from omnijax.geometry import wrap_pi
-from omnijax.zoom import ZOOM_RULES
+from omnijax.zoom import ZOOM_RULES, face_pixels
 from runtime.realtime import kalman
 
 
@@ -53,9 +54,10 @@ def pan_tilt_slew_s(pan, tilt, sent_pan, sent_tilt, pan_deg_s, tilt_deg_s):
 
 
 class Slew(eqx.Module):
-    """What the head's prediction horizon needs: whether a command was sent (and a PTZ profile is
-    known: otherwise the horizon is 0), its pan and tilt (rad), the slew rates (deg/s) and the device's
-    command latency (s, the profile's ``link.command_latency_s``)."""
+    """What the head's prediction horizon needs, per PTZ (arrays (K,) in the rig's order; a scalar
+    applies to every PTZ): whether a command was sent (and a PTZ profile is known: otherwise the
+    horizon is 0), its pan and tilt (rad), the slew rates (deg/s) and the device's command latency (s,
+    the profile's ``link.command_latency_s``)."""
 
     known: jax.Array
     pan: jax.Array
@@ -70,8 +72,10 @@ class Control(eqx.Module):
     background's life); ``z``, ``R`` the detections' floor points and covariances. Tracker:
     ``assign`` (N,) each slot's detection (-1: none), ``x`` (N, 4), ``P`` (N, 4, 4) after the step.
     Aims: ``aim_slot`` (A,) the slots of the confirmed tracks (``aim_ok`` (A,) which entries are
-    real), ``aims`` their :class:`~omnijax.aiming.Aim` (batched), ``lead`` (A,) the prediction horizon
-    (s) and ``floor_sd`` (A, 2) the sd of the predicted floor position (m)."""
+    real); per PTZ and track, ``aims`` their :class:`~omnijax.aiming.Aim` (batched, (K, A)), ``lead``
+    (K, A) the prediction horizon (s: that PTZ's command latency and slew time to the track),
+    ``floor_sd`` (K, A, 2) the sd of the predicted floor position (m) and ``face_px`` {rule: (K, A)}
+    the head's width in the PTZ's image at that rule's zoom (px)."""
 
     dets: object
     d2: jax.Array
@@ -85,15 +89,17 @@ class Control(eqx.Module):
     aims: Aim
     lead: jax.Array
     floor_sd: jax.Array
+    face_px: dict[str, jax.Array]
 
 
 @functools.partial(jax.jit, static_argnames=("mode", "confirm"))
 def control_step(detector: Detector, rig: Rig, frame, lines, slots, t, accel_sd, nearest_gate_m,
                  slew: Slew, mode: str = "kalman", confirm: int = 2) -> Control:
-    """Frame -> detections -> tracks -> pan/tilt/zoom of every confirmed track, in one compiled call
-    (see the module docstring). ``slots``: the tracker's (x, P, t, live, hits) slot arrays
-    (:meth:`~runtime.realtime.tracker.Tracker.slots`); ``t``: the frame's time (s); ``mode``,
-    ``accel_sd``, ``nearest_gate_m``, ``confirm``: the tracker's settings."""
+    """Frame -> detections -> tracks -> pan/tilt/zoom of every (PTZ, confirmed track) pair, in one
+    compiled call (see the module docstring). ``slots``: the tracker's (x, P, t, live, hits) slot arrays
+    (:meth:`~runtime.realtime.tracker.Tracker.slots`); ``t``: the frame's time (s); ``slew``: each PTZ's
+    last command and rates; ``mode``, ``accel_sd``, ``nearest_gate_m``, ``confirm``: the tracker's
+    settings."""
     dets, trace, z, R = perceive(detector, rig, frame, lines)
     x, P, t_tracks, live, hits = slots
     assign, x_new, P_new = kalman.step(mode, accel_sd, nearest_gate_m, x, P, t_tracks, live, t, z, R, dets.valid)
@@ -101,14 +107,21 @@ def control_step(detector: Detector, rig: Rig, frame, lines, slots, t, accel_sd,
     n_aim = dets.valid.shape[0]
     aim_slot = jnp.nonzero(confirmed, size=n_aim, fill_value=0)[0]
     aim_ok = jnp.arange(n_aim) < confirmed.sum()
+    slew = jax.tree.map(lambda a: jnp.broadcast_to(a, (rig.ptz_count,)), slew)
 
-    def one(x, P):
-        now = aim_at_floor(rig, x[:2], P[:2, :2], ZOOM_RULES).pointing  # only pan/tilt are kept (the rest is dead)
+    def one(ptz, slew, x, P):
+        now = aim_at_floor(ptz, x[:2], P[:2, :2], ZOOM_RULES).pointing  # only pan/tilt are kept (the rest is dead)
         lead = jnp.where(slew.known, slew.latency_s + pan_tilt_slew_s(now.pan, now.tilt, slew.pan, slew.tilt,
                                                                       slew.pan_deg_s, slew.tilt_deg_s), 0.0)
         xp, Pp = kalman.predict(x, P, lead, accel_sd)
-        return aim_at_floor(rig, xp[:2], Pp[:2, :2], ZOOM_RULES), lead, jnp.sqrt(jnp.diagonal(Pp)[:2])
+        aimed = aim_at_floor(ptz, xp[:2], Pp[:2, :2], ZOOM_RULES)
+        face = {rule: face_pixels(ptz.foveal.lens, aimed.zooms[rule].zoom, aimed.pointing.slant, ptz.person.R_h)
+                for rule in ZOOM_RULES}
+        return aimed, lead, jnp.sqrt(jnp.diagonal(Pp)[:2]), face
 
-    aims, lead, floor_sd = jax.vmap(one)(x_new[aim_slot], P_new[aim_slot])
+    def camera(ptz, slew):
+        return jax.vmap(functools.partial(one, ptz, slew))(x_new[aim_slot], P_new[aim_slot])
+
+    aims, lead, floor_sd, face = jax.vmap(camera)(rig.ptz_stack(), slew)
     return Control(dets=dets, d2=trace.d2, z=z, R=R, assign=assign, x=x_new, P=P_new, aim_slot=aim_slot,
-                   aim_ok=aim_ok, aims=aims, lead=lead, floor_sd=floor_sd)
+                   aim_ok=aim_ok, aims=aims, lead=lead, floor_sd=floor_sd, face_px=face)

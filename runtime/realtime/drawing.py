@@ -28,7 +28,7 @@ LISTED = 1000
 class OffPath:
     """The drawing and logging thread (see the module docstring).
 
-    ``hooks(record, frame, dets, z, tracks, command, status)`` returns extra log fields;
+    ``hooks(record, frame, dets, z, tracks, commands, status)`` returns extra log fields;
     ``describe(item) -> dict`` the log fields of a processed frame; ``timings`` gets the ``draw``
     and ``log`` stage times (ms).
     """
@@ -47,7 +47,7 @@ class OffPath:
 
     def submit(self, item: dict) -> bool:
         """Queue ``item`` (``record``, and for a processed frame ``frame``, ``dets``, ``z``, ``tracks``,
-        ``command``, ``status``) without waiting; ``False`` (and counted) when the queue is full.
+        ``commands``, ``status``) without waiting; ``False`` (and counted) when the queue is full.
         With ``block`` (frames not paced: ``--pace all``, nothing is late) it waits for room instead."""
         try:
             if self.block:
@@ -97,7 +97,7 @@ class OffPath:
             t = time.monotonic()
             if self.hooks is not None:
                 record.update(self.hooks(record, item["frame"], item["dets"], item["z"], item["tracks"],
-                                         item["command"], item["status"]) or {})
+                                         item["commands"], item["status"]) or {})
             t = self.record_time("draw", t)
             record.update(self.describe(item))
             self._log.write(json.dumps(record) + "\n")

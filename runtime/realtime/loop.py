@@ -5,14 +5,17 @@ The control thread does only this, per frame (each stage timed):
 1. ``capture``: the newest frame from the :class:`~runtime.sources.Capture` (stale frames are
    rejected there, broken and wrong-size frames are counted here and skipped);
 2. ``control``: one compiled call (:func:`runtime.realtime.control.control_step`): the detector,
-   the detections' floor positions, the tracker's arithmetic, and the aim pipeline at every
-   confirmed track's head predicted to when the PTZ will get there (tracking and latency
+   the detections' floor positions, the tracker's arithmetic, and the aim pipeline for every PTZ at
+   every confirmed track's head predicted to when that PTZ will get there (tracking and latency
    uncertainty included): pan/tilt, their covariance and the zoom of both rules;
 3. ``track``: the tracker's bookkeeping (ids, hits, misses);
-4. ``aim``: the target chosen (:class:`~runtime.realtime.targeting.TargetSelector`; only trusted
-   tracks the PTZ can frame at ``p_contain``: else the loop holds and counts why, ``held_untrusted``
-   or ``held_unframeable``) and its aim taken from the call's result, the dead-zone test;
-5. ``send``: the PTZ command through the driver, unless it falls in the dead-zone;
+4. ``aim``: the target chosen, with one PTZ by the :class:`~runtime.realtime.targeting.TargetSelector`,
+   with several by the exact assignment of :class:`~runtime.realtime.assignment.CameraAssigner` (only
+   trusted tracks a PTZ can frame at ``p_contain``: else the loop holds and counts why,
+   ``held_untrusted`` or ``held_unframeable``), each target's aim taken from the call's result, the
+   dead-zone test;
+5. ``send``: each PTZ's command through its driver (:class:`~runtime.realtime.ptz_link.PtzLink`),
+   unless it falls in the dead-zone;
 6. ``adapt``: the background's life dispatched (:class:`~runtime.realtime.perception.BackgroundKeeper`:
    ghost repair, absorption, drift, fed by the tracker's trusted people; it runs while the loop waits
    for the next frame).
@@ -49,11 +52,13 @@ import numpy as np
 
 from omnijax import INPUT_NAMES, Aim, Detector, Rig
 from omnijax.zoom import ZOOM_RULES
+from runtime.realtime.assignment import CameraAssigner, PairValues
 from runtime.realtime.config import LoopConfig
-from runtime.realtime.control import Slew, control_step, pan_tilt_slew_s, perceive
+from runtime.realtime.control import control_step, perceive
 from runtime.realtime.drawing import OffPath
 from runtime.realtime.operator import Operator, OperatorState
 from runtime.realtime.perception import BackgroundKeeper
+from runtime.realtime.ptz_link import PtzLink
 from runtime.realtime.sources import Capture, Frame
 from runtime.realtime.targeting import TargetSelector, can_frame, outside_dead_zone, trust_rule
 from runtime.realtime.tracker import Tracker
@@ -61,7 +66,6 @@ from runtime.realtime.zones import priority_test
 
 #: Timed stages: the control thread's, then the drawing thread's (``draw``: the hooks; ``log``).
 STAGES = ("capture", "control", "track", "aim", "send", "adapt", "draw", "log")
-_slew_s = jax.jit(pan_tilt_slew_s)
 __all__ = ["STAGES", "Command", "RealTimeLoop", "Samples", "Timings", "perceive"]
 
 
@@ -127,37 +131,47 @@ class Timings:
 class RealTimeLoop:
     """Runs detection, tracking and PTZ control over a :class:`Capture` (see the module docstring).
 
-    Hooks: ``on_frame(record, frame, dets, z, tracks, command, status)`` for each processed frame,
+    Hooks: ``on_frame(record, frame, dets, z, tracks, commands, status)`` for each processed frame,
     called on the drawing thread, with ``dets`` the detections (NumPy), ``z`` the valid detections'
     floor positions (K, 2) m (the demo scores there and the annotated view is drawn there),
-    ``tracks`` the tracks confirmed at that frame (copies), ``status`` the loop's counters then
-    (:meth:`status`); it returns extra log fields.
+    ``tracks`` the tracks confirmed at that frame (copies), ``commands`` each PTZ's :class:`Command`
+    (``None``: no target), in the rig's order, ``status`` the loop's counters then (:meth:`status`);
+    it returns extra log fields.
     ``on_control(record, frame)``: called on the control thread after the send (fault injection
     that must happen at its frame), returning extra log fields; keep it cheap.
-    ``driver`` may be ``None`` (no PTZ: commands are computed and logged only). ``operator``: the
-    console's requests (:class:`~runtime.realtime.operator.Operator`), read once a frame; ``None``: none.
+    ``links``: one :class:`~runtime.realtime.ptz_link.PtzLink` per PTZ of the rig, in its order (a link
+    without a driver: commands are computed and logged only). ``operator``: the console's requests
+    (:class:`~runtime.realtime.operator.Operator`), read once a frame; ``None``: none.
     """
 
-    def __init__(self, rig: Rig, detector: Detector, background, capture: Capture, driver, profile,
+    def __init__(self, rig: Rig, detector: Detector, background, capture: Capture, links: list[PtzLink],
                  config: LoopConfig, log_path: Path, on_frame: Callable | None = None,
                  on_control: Callable | None = None, operator: Operator | None = None,
                  learning_frames: int | None = None):
+        if len(links) != rig.ptz_count:
+            raise ValueError(f"one PTZ link per PTZ of the rig ({rig.ptz_count}), got {len(links)}")
         self.rig, self.detector, self.capture = rig, detector, capture
         self.operator = operator
         self.zones, self.zones_version = rig.zones, 0
-        self.driver, self.profile, self.cfg = driver, profile, config
+        self.links, self.cfg = list(links), config
         self.tracker = Tracker(config.tracker)
         if self.tracker.confirm < 2:
             raise ValueError("the fused control step aims at tracks matched again this frame: confirm must be >= 2")
         #: tracker slots in the compiled step; beyond them the tracks missing longest are dropped (counted)
         self.n_slots = 4 * detector.max_people
+        #: one PTZ: the round-robin selector; several: the exact assignment (its own trust and ghost sites)
         self.selector = TargetSelector(config.target, config.dwell_s, trust_rule(config))
+        self.assigner = (CameraAssigner(len(links), config.dwell_s, trust_rule(config),
+                                        float(rig.layout.face_target_px), capacity=self.n_slots)
+                         if len(links) > 1 else None)
         #: how the background was learnt (frames, seconds, step, frame indices), for the summary
         self.learning: dict | None = None
         #: the background's life, stepped every ``adapt_every``-th frame after the send
         self.keeper = BackgroundKeeper(rig, detector, background, trust_rule(config), capture.source.fps,
                                        learning_frames or rig.detection.background_frames, config.adapt_every)
         self.selector.priority = priority_test(rig)
+        if self.assigner is not None:
+            self.assigner.priority = self.selector.priority
         self.timings = Timings()
         self.on_frame, self.on_control = on_frame, on_control
         self.log_path = log_path
@@ -165,24 +179,22 @@ class RealTimeLoop:
                        "no_target": 0, "held_untrusted": 0, "held_unframeable": 0, "held_paused": 0,
                        "operator_frames": 0,
                        "invalid_geometry": 0, "deadline_overruns": 0, "tracks_over_slots": 0}
-        self.sent: tuple[float, float, float] | None = None
-        self.sent_at: float | None = None
-        self._arrive_at = 0.0
-        self._sent_track: int | None = None
+        #: per PTZ, frames on which it had a target
+        self.target_frames = [0] * len(links)
         self._stop = threading.Event()
         self._old_handlers: dict = {}
         self.t_start = time.monotonic()
-        self._pending: dict[int, float] = {}  # driver sequence number -> frame available time
         self.stop_reason = "source ended"
         self.off_path: OffPath | None = None
         self._framable: set[int] = set()
         W, H = rig.omni.image_size
         self.shape = (H, W, 3)
         self.period = 1.0 / capture.source.fps if capture.source.fps else None
-        if profile is not None:
-            self._rates = (float(profile.pan.slew_deg_s()), float(profile.tilt.slew_deg_s()))
-        else:
-            self._rates = (1.0, 1.0)
+
+    @property
+    def sent(self) -> tuple[float, float, float] | None:
+        """The first PTZ's last command (pan, tilt rad, zoom)."""
+        return self.links[0].sent
 
     # -- control --------------------------------------------------------------------------
 
@@ -203,11 +215,7 @@ class RealTimeLoop:
 
     def _control(self, image, t: float):
         """The compiled per-frame call on ``image`` at time ``t`` with the tracker's current slots."""
-        slew = Slew(known=jnp.asarray(self.sent is not None and self.profile is not None),
-                    pan=jnp.asarray(self.sent[0] if self.sent else 0.0),
-                    tilt=jnp.asarray(self.sent[1] if self.sent else 0.0),
-                    pan_deg_s=jnp.asarray(self._rates[0]), tilt_deg_s=jnp.asarray(self._rates[1]),
-                    latency_s=jnp.asarray(self.profile.link.command_latency_s if self.profile is not None else 0.0))
+        slew = jax.tree.map(lambda *a: jnp.stack(a), *[link.slew() for link in self.links])
         tr = self.tracker
         return control_step(self.detector, self.rig, image, self.keeper.lines, tr.slots(self.n_slots),
                             jnp.asarray(t, float), tr.accel_sd, tr.nearest_gate_m, slew, mode=tr.mode,
@@ -220,7 +228,10 @@ class RealTimeLoop:
         out = jax.block_until_ready(self._control(blank, 0.0))
         dets = out.dets
         self.keeper.warm_up(blank, dets, out.d2)
-        _slew_s(0.0, 0.0, 0.0, 0.0, *self._rates).block_until_ready()
+        for link in self.links:
+            link.warm_up()
+        if self.assigner is not None:
+            self.assigner.warm_up()
         return dets
 
     # -- the loop -------------------------------------------------------------------------
@@ -305,77 +316,70 @@ class RealTimeLoop:
         t = self._record("track", t)
         aim_of = {slots[int(i)].id: j for j, (i, ok) in enumerate(zip(c.aim_slot, c.aim_ok)) if ok}
         pointing = op.pointing(time.monotonic()) if op is not None else None
-        if pointing is not None:
-            command = self._manual(frame, pointing)
+        if self.assigner is None:
+            commands = [self._manual(frame, pointing, self.links[0]) if pointing is not None
+                        else self._aim(frame, confirmed, c, aim_of, op)]
+            held = self.selector.held
         else:
-            command = self._aim(frame, confirmed, c, aim_of, op)
+            commands, held = self._assign(frame, confirmed, c, aim_of, op, pointing)
         if op is not None and (pointing is not None or op.paused or op.target is not None):
             record["operator"] = "point" if pointing is not None else "paused" if op.paused else "target"
             self.counts["operator_frames"] += 1
+        for k, command in enumerate(commands):
+            if command is not None and command.track is not None:
+                self.target_frames[k] += 1
         t = self._record("aim", t)
-        if command is not None and command.sent:
-            self._send(command, frame.stamp)
+        sent = [k for k, command in enumerate(commands) if command is not None and command.sent]
+        for k in sent:
+            self.links[k].send(commands[k], frame.stamp, frame.t)
+            self.counts["commands_sent"] += 1
         t_sent = time.monotonic()
         self._record("send", t)
-        if command is not None and command.sent:
+        for k in sent:
             self.timings.compute.append(1e3 * (t_sent - frame.t))
-            if self.driver is None:
+            if self.links[k].driver is None:
                 self.timings.latency.append(1e3 * (t_sent - frame.t))
-            else:
-                self._pending[self.driver.sequence] = frame.t
         self._collect_writes()
         if self.on_control is not None:
             record.update(self.on_control(record, frame) or {})
         t = t_sent
-        if command is None and self.selector.held is not None:
-            record["held"] = self.selector.held
+        if all(command is None for command in commands) and held is not None:
+            record["held"] = held
         if self.counts["frames"] % self.cfg.adapt_every == 0:  # dispatched, not waited for
             where = np.nonzero(valid)[0]
             slot_of = {tr.id: int(where[tr.detection]) for tr in tracker.tracks if tr.detection is not None}
             self.keeper.update(x, out.dets, out.d2, self.keeper.trusted(tracker.tracks, slot_of, valid.shape[0]))
         self._record("adapt", t)
         self.off_path.submit({"record": record, "frame": frame, "dets": c.dets, "z": z,
-                              "tracks": [copy.copy(tr) for tr in confirmed], "command": command,
+                              "tracks": [copy.copy(tr) for tr in confirmed], "commands": commands,
                               "status": self.status()})
         elapsed = time.monotonic() - frame.t
         self.timings.frame.append(1e3 * elapsed)
         if self.period and elapsed > self.period:
             self.counts["deadline_overruns"] += 1
 
+    @property
+    def captures(self) -> int:
+        """Faces captured so far (the selector's or the assignment's)."""
+        return self.selector.captures if self.assigner is None else self.assigner.captures
+
     def status(self) -> dict:
-        """A snapshot of the loop's counters for the drawing thread (taken on the control thread)."""
-        st = {"frames": self.counts["frames"], "elapsed": time.monotonic() - self.t_start,
-              "counts": dict(self.counts), "capture": dict(self.capture.counts), "captures": self.selector.captures,
-              "driver": None, "held": self.selector.held, "framable": sorted(self._framable),
-              "sent": self.sent, "operator": self.operator.state if self.operator is not None else None,
-              "zones_version": self.zones_version}
-        if self.driver is not None:
-            st["driver"] = {"connected": self.driver.connected, **self.driver.counters}
-        return st
+        """A snapshot of the loop's counters for the drawing thread (taken on the control thread): the first
+        PTZ's ``sent`` and ``driver``, and ``cameras``: each PTZ's (``sent``, ``driver``, ``held``)."""
+        held = [self.selector.held] if self.assigner is None else list(self.assigner.held)
+        cameras = [{"sent": link.sent, "driver": link.link_status(), "held": h} for link, h in zip(self.links, held)]
+        return {"frames": self.counts["frames"], "elapsed": time.monotonic() - self.t_start,
+                "counts": dict(self.counts), "capture": dict(self.capture.counts), "captures": self.captures,
+                "driver": cameras[0]["driver"], "held": next((h for h in held if h is not None), None),
+                "framable": sorted(self._framable), "sent": self.sent,
+                "operator": self.operator.state if self.operator is not None else None,
+                "zones_version": self.zones_version, "cameras": cameras}
 
-    def _settled(self, stamp: float) -> bool:
-        """Whether the PTZ should have reached the last command by the frame stamped ``stamp`` (slew-time
-        estimate on the frames' clock, so that ``--pace all`` runs are repeatable)."""
-        if self.sent_at is None or self.sent is None:
-            return False
-        return stamp >= self._arrive_at
-
-    def _slew_time(self, target: tuple[float, float, float]) -> float:
-        """Seconds the PTZ needs from the last command to ``target``: the device profile's command latency,
-        then its slew rates and zoom speed."""
-        if self.profile is None or self.sent is None:
-            return 0.0
-        pan_tilt = float(_slew_s(target[0], target[1], self.sent[0], self.sent[1], *self._rates))
-        zp = self.profile.zoom
-        z_span = max(zp.position) - min(zp.position)
-        d_zoom = abs(self.profile.zoom_position(target[2]) - self.profile.zoom_position(self.sent[2])) / z_span
-        return self.profile.link.command_latency_s + max(pan_tilt, d_zoom * zp.seconds_full_range)
-
-    def _manual(self, frame: Frame, pointing: tuple[float, float, float]) -> Command:
-        """The operator's manual pointing as this frame's command (sent when it changes)."""
+    def _manual(self, frame: Frame, pointing: tuple[float, float, float], link: PtzLink) -> Command:
+        """The operator's manual pointing as this frame's command for ``link``'s PTZ (sent when it changes)."""
         pan, tilt, zoom = pointing
         return Command(track=None, pan=pan, tilt=tilt, zoom=zoom, zooms=dict.fromkeys(ZOOM_RULES, zoom), sd_pan=0.0,
-                       sd_tilt=0.0, sent=self.sent != pointing or self._sent_track is not None,
+                       sd_tilt=0.0, sent=link.sent != pointing or link.sent_track is not None,
                        t_predicted=frame.stamp)
 
     def _aim(self, frame: Frame, tracks, c, aim_of: dict[int, int], op: OperatorState | None = None) -> Command | None:
@@ -388,7 +392,7 @@ class RealTimeLoop:
             j = aim_of.get(track.id)
             if j is None:  # not aimed at in the control step (not matched this frame)
                 return False
-            aims[track.id] = (j, jax.tree.map(lambda a: a[j], c.aims))
+            aims[track.id] = (j, _entry(c.aims, 0, j))
             if not bool(aims[track.id][1].pointing.valid):
                 self.counts["invalid_geometry"] += 1
             ok = can_frame(aims[track.id][1], self.cfg.zoom_rule)
@@ -399,7 +403,8 @@ class RealTimeLoop:
         if op is not None:  # the console shows which tracks the operator can pick
             for tr in tracks:
                 framable(tr)
-        target = self.selector.choose(frame.stamp, tracks, self._settled(frame.stamp), framable,
+        link = self.links[0]
+        target = self.selector.choose(frame.stamp, tracks, link.settled(frame.stamp), framable,
                                       manual=op.target if op is not None else None,
                                       paused=op is not None and op.paused)
         if target is None:
@@ -408,46 +413,75 @@ class RealTimeLoop:
                 self.counts[f"held_{self.selector.held}"] += 1
             return None
         j, aimed = aims[target.id]
+        return self._command(frame, c, 0, j, target.id, aimed)
+
+    def _command(self, frame: Frame, c, k: int, j: int, track: int, aimed: Aim) -> Command:
+        """PTZ ``k``'s command at track ``track`` (its aim ``aimed``, entry ``j`` of the control call's), sent
+        unless it is the track the PTZ was sent to last and within the dead zone."""
+        link = self.links[k]
         zooms = {rule: float(aimed.zooms[rule].zoom) for rule in ZOOM_RULES}
         pan, tilt, zoom = float(aimed.pointing.pan), float(aimed.pointing.tilt), zooms[self.cfg.zoom_rule]
         cov = aimed.covariance.cov
         sd_pan, sd_tilt = math.sqrt(cov[0, 0]), math.sqrt(cov[1, 1])
-        new_target = self.selector.current != self._sent_track
-        send = new_target or outside_dead_zone((pan, tilt, zoom), self.sent, sd_pan, sd_tilt, self.cfg.dead_zone_sd)
+        new_target = track != link.sent_track
+        send = new_target or outside_dead_zone((pan, tilt, zoom), link.sent, sd_pan, sd_tilt, self.cfg.dead_zone_sd)
         if not send:
             self.counts["dead_zone"] += 1
-        return Command(track=target.id, pan=pan, tilt=tilt, zoom=zoom, zooms=zooms, sd_pan=sd_pan,
-                       sd_tilt=sd_tilt, sent=send, t_predicted=frame.stamp + float(c.lead[j]), aimed=aimed,
-                       floor_sd=c.floor_sd[j])
+        return Command(track=track, pan=pan, tilt=tilt, zoom=zoom, zooms=zooms, sd_pan=sd_pan,
+                       sd_tilt=sd_tilt, sent=send, t_predicted=frame.stamp + float(c.lead[k, j]), aimed=aimed,
+                       floor_sd=c.floor_sd[k, j])
 
-    def _send(self, cmd: Command, stamp: float) -> None:
-        """Hand ``cmd`` to the driver; the PTZ is expected there its slew time after the frame ``stamp``."""
-        if self.driver is not None:
-            self.driver.set_target(cmd.pan, cmd.tilt, cmd.zoom)
-            time.sleep(0)  # hand the GIL to the driver's worker now, so that the bytes go out at once
-        self._arrive_at = stamp + self._slew_time((cmd.pan, cmd.tilt, cmd.zoom))
-        self.sent = (cmd.pan, cmd.tilt, cmd.zoom)
-        self.sent_at = time.monotonic()
-        self._sent_track = cmd.track
-        self.counts["commands_sent"] += 1
+    def _assign(self, frame: Frame, tracks, c, aim_of: dict[int, int], op: OperatorState | None,
+                pointing: tuple[float, float, float] | None) -> tuple[list[Command | None], str | None]:
+        """Several PTZs: each one's command from the exact assignment (:class:`CameraAssigner`); the PTZ the
+        operator points by hand gets the pointing. Also why no PTZ has a target, if none has."""
+        K, rule = len(self.links), self.cfg.zoom_rule
+        manual_k = op.point_camera if pointing is not None else None
+        pz, pf, pp = c.aims.pointing.valid, c.aims.zooms[rule].feasible, c.aims.zooms[rule].probability
+        self._framable = set()
+
+        def pairs(cands) -> PairValues:
+            js = [aim_of.get(tr.id) for tr in cands]
+            aimed = np.array([j is not None for j in js])
+            idx = np.array([j if j is not None else 0 for j in js], int)
+            framable = (pz[:, idx] & pf[:, idx]) & aimed[None, :]
+            self.counts["invalid_geometry"] += int((~pz[:, idx] & aimed[None, :]).sum())
+            self._framable = {tr.id for tr, ok in zip(cands, framable.any(0)) if ok}
+            return PairValues(framable=framable, probability=pp[:, idx], face_px=c.face_px[rule][:, idx],
+                              slew_s=c.lead[:, idx])
+
+        targets = self.assigner.choose(frame.stamp, tracks, [link.settled(frame.stamp) for link in self.links],
+                                       pairs, manual=op.target if op is not None else None,
+                                       paused=op is not None and op.paused,
+                                       free=[k != manual_k for k in range(K)])
+        commands: list[Command | None] = []
+        for k, target in enumerate(targets):
+            if k == manual_k:
+                commands.append(self._manual(frame, pointing, self.links[k]))
+            elif target is None:
+                commands.append(None)
+            else:
+                j = aim_of[target.id]
+                commands.append(self._command(frame, c, k, j, target.id, _entry(c.aims, k, j)))
+        held = next((h for h in self.assigner.held if h is not None), None)
+        if all(command is None for command in commands):
+            self.counts["no_target"] += 1
+            if held is not None:
+                self.counts[f"held_{held}"] += 1
+        return commands, held
 
     def _collect_writes(self) -> None:
-        """Frame-to-wire latency of the targets the driver has written (superseded ones never are)."""
-        if self.driver is None:
-            return
-        for seq, t_write in self.driver.take_writes():
-            t_frame = self._pending.pop(seq, None)
-            if t_frame is not None:
-                self.timings.latency.append(1e3 * (t_write - t_frame))
-            for k in [k for k in self._pending if k < seq]:
-                del self._pending[k]
+        """Frame-to-wire latency of the targets the drivers have written (superseded ones never are)."""
+        for link in self.links:
+            for ms in link.take_latencies():
+                self.timings.latency.append(ms)
 
     def home(self, wait_s: float = 3.0) -> bool:
-        """Send the PTZ home (end of run); whether it reported being there within ``wait_s``."""
-        if self.driver is None:
-            return True
-        self.driver.set_target(*self.cfg.home)
-        reached = self.driver.wait_reached(wait_s)
+        """Send every PTZ home (end of run); whether all reported being there within ``wait_s``."""
+        drivers = [link.driver for link in self.links if link.driver is not None]
+        for driver in drivers:  # all at once; then wait for each
+            driver.set_target(*self.cfg.home)
+        reached = all([driver.wait_reached(wait_s) for driver in drivers])
         self._collect_writes()
         return reached
 
@@ -455,8 +489,9 @@ class RealTimeLoop:
 
     @staticmethod
     def _describe(item: dict) -> dict:
-        """The log fields of a processed frame (on the drawing thread; everything in it is NumPy)."""
-        dets, command = item["dets"], item["command"]
+        """The log fields of a processed frame (on the drawing thread; everything in it is NumPy): ``ptz``
+        the command of a rig's one PTZ, ``ptzs`` each PTZ's of several (``null`` where it has no target)."""
+        dets, commands = item["dets"], item["commands"]
         people = [{"r_f": round(float(dets.r_f[k]), 3), "theta_f": round(float(dets.theta_f[k]), 5),
                    "sigma_r_f": round(float(dets.sigma_r_f[k]), 3),
                    "sigma_theta_f": round(float(dets.sigma_theta_f[k]), 5),
@@ -465,27 +500,26 @@ class RealTimeLoop:
                "tracks": [{"id": tr.id, "xy": [round(float(v), 3) for v in tr.position],
                            "v": [round(float(v), 3) for v in tr.x[2:]], "captured": tr.captured}
                           for tr in item["tracks"]]}
-        if command is not None:
-            out["ptz"] = {"track": command.track, "pan_deg": round(math.degrees(command.pan), 3),
-                          "tilt_deg": round(math.degrees(command.tilt), 3), "zoom": round(command.zoom, 3),
-                          "zooms": {k: round(v, 3) for k, v in command.zooms.items()},
-                          "sd_pan_deg": round(math.degrees(command.sd_pan), 4),
-                          "sd_tilt_deg": round(math.degrees(command.sd_tilt), 4), "sent": command.sent,
-                          "t_predicted": round(command.t_predicted, 4),
-                          "floor_sd_m": (None if command.floor_sd is None
-                                         else [round(float(v), 4) for v in command.floor_sd])}
+        described = [None if command is None else _describe_command(command) for command in commands]
+        if len(described) > 1:
+            out["ptzs"] = described
+        elif described[0] is not None:
+            out["ptz"] = described[0]
         return out
 
     def _status(self, elapsed: float) -> None:
         n = self.counts["frames"]
         lat = self.timings.latency.recent(50)
-        ptz = ""
-        if self.sent is not None:
-            ptz = f"PTZ {math.degrees(self.sent[0]):6.1f}/{math.degrees(self.sent[1]):5.1f} deg x{self.sent[2]:4.1f}"
-        errors = ""
-        if self.driver is not None:
-            c = self.driver.counters
-            errors = f" err {c['errors']} reconn {c['reconnects']}" + ("" if self.driver.connected else " [PTZ down]")
+        ptz, errors = [], ""
+        for link in self.links:
+            sent = link.sent
+            if sent is not None:
+                ptz.append(f"{math.degrees(sent[0]):6.1f}/{math.degrees(sent[1]):5.1f} deg x{sent[2]:4.1f}")
+            d = link.driver
+            if d is not None:
+                c = d.counters
+                errors += f" err {c['errors']} reconn {c['reconnects']}" + ("" if d.connected else " [PTZ down]")
+        ptz = ("PTZ " if len(ptz) == 1 else "PTZs ") + ", ".join(ptz) if ptz else ""
         sys.stderr.write(
             f"\r{n:6d} frames {n / max(elapsed, 1e-9):5.1f} fps | latency "
             f"{np.median(lat) if lat.size else float('nan'):5.2f} ms | tracks {len(self.tracker.confirmed()):2d} | "
@@ -495,11 +529,18 @@ class RealTimeLoop:
     def summary(self) -> dict:
         """The ``summary.json`` object (docs/design.md section 7.3), without the demo's scores."""
         frames = self.counts["frames"]
+        drivers = [link.driver.stats() if link.driver is not None else None for link in self.links]
         ptz = {"commands": self.counts["commands_sent"], "errors": 0, "reconnects": 0}
-        if self.driver is not None:
-            st = self.driver.stats()
-            ptz = {"commands": st["commands"], "errors": st["errors"], "reconnects": st["reconnects"],
-                   "commands_requested": self.counts["commands_sent"], "driver": st}
+        if any(drivers):
+            ptz = {key: sum(st[key] for st in drivers if st) for key in ("commands", "errors", "reconnects")}
+            ptz["commands_requested"] = self.counts["commands_sent"]
+            if len(drivers) == 1:
+                ptz["driver"] = drivers[0]
+        assigned = self.assigner.summary() if self.assigner is not None else [
+            {"id": 0, "handoffs": 0, "handed_over": 0, "held": {f"{h}": self.counts[f"held_{h}"] for h in
+                                                                ("untrusted", "unframeable", "paused")}}]
+        cameras = [{**a, "target_frames": self.target_frames[k], "commands_requested": self.links[k].commands,
+                    "driver": drivers[k]} for k, a in enumerate(assigned)]
         return {
             "frames": frames,
             "fps": frames / self.elapsed if getattr(self, "elapsed", 0) else 0.0,
@@ -518,9 +559,29 @@ class RealTimeLoop:
             "off_path": self.off_path.summary() if self.off_path is not None else None,
             "counts": self.counts,
             "background": self.keeper.summary(),
-            "captures": self.selector.captures,
+            "captures": self.captures,
+            "cameras": cameras,
+            "assignment": None if self.assigner is None else {
+                "hysteresis": self.assigner.hysteresis, "face_target_px": self.assigner.face_target_px,
+                "doubled_while_waiting": self.assigner.doubled_while_waiting},
             "config": {"zoom_rule": self.cfg.zoom_rule, "tracker": self.cfg.tracker, "target": self.cfg.target,
                        "dwell_s": self.cfg.dwell_s, "dead_zone_sd": self.cfg.dead_zone_sd,
                        "trust": dataclasses.asdict(self.selector.trust),
-                       "inputs": list(INPUT_NAMES)},
+                       "inputs": list(INPUT_NAMES), "ptz_count": len(self.links)},
         }
+
+
+def _entry(aims: Aim, k: int, j: int) -> Aim:
+    """PTZ ``k``'s aim at the control call's track entry ``j``."""
+    return jax.tree.map(lambda a: a[k, j], aims)
+
+
+def _describe_command(command: Command) -> dict:
+    """A command's log fields."""
+    return {"track": command.track, "pan_deg": round(math.degrees(command.pan), 3),
+            "tilt_deg": round(math.degrees(command.tilt), 3), "zoom": round(command.zoom, 3),
+            "zooms": {k: round(v, 3) for k, v in command.zooms.items()},
+            "sd_pan_deg": round(math.degrees(command.sd_pan), 4),
+            "sd_tilt_deg": round(math.degrees(command.sd_tilt), 4), "sent": command.sent,
+            "t_predicted": round(command.t_predicted, 4),
+            "floor_sd_m": (None if command.floor_sd is None else [round(float(v), 4) for v in command.floor_sd])}

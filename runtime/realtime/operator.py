@@ -5,11 +5,12 @@ with one attribute read (:attr:`Operator.state`, an immutable :class:`OperatorSt
 under a lock), so that the control thread never waits for anyone:
 
 - ``target``: the track the operator chose; the selector keeps it while it is there and can be framed,
-  then goes back to its own choice (:class:`~runtime.realtime.targeting.TargetSelector`, ``manual``);
-- ``paused``: automatic targeting paused: no target, no command (the PTZ stays where it is);
-- ``point``: a manual pan, tilt (rad) and zoom, sent instead of any target's until ``point_until``
-  (``time.monotonic()``) or until released: a click on the floor, the home button, the calibration
-  assistant's keys.
+  then goes back to its own choice (:class:`~runtime.realtime.targeting.TargetSelector`, ``manual``;
+  with several PTZs the assignment keeps it on the PTZ best placed for it);
+- ``paused``: automatic targeting paused: no target, no command (the PTZs stay where they are);
+- ``point``: a manual pan, tilt (rad) and zoom for PTZ ``point_camera`` (the rig's order; 0 with one
+  PTZ), sent instead of any target's until ``point_until`` (``time.monotonic()``) or until released: a
+  click on the floor, the home button, the calibration assistant's keys. The other PTZs go on.
 
 Zones are swapped in the same way (:meth:`Operator.offer_zones`: a detector rebuilt off the control
 thread and the priority test, taken by the control thread at the start of its next frame).
@@ -36,6 +37,7 @@ class OperatorState:
     paused: bool = False
     point: tuple[float, float, float] | None = None
     point_until: float = 0.0
+    point_camera: int = 0
     version: int = 0
 
     def pointing(self, now: float) -> tuple[float, float, float] | None:
@@ -76,12 +78,13 @@ class Operator:
         """Pause (or resume) the automatic targeting."""
         return self._update(paused=bool(paused))
 
-    def point(self, pan: float, tilt: float, zoom: float, seconds: float = POINT_S) -> OperatorState:
-        """Send the PTZ to ``pan``, ``tilt`` (rad), ``zoom`` for ``seconds`` (or until :meth:`release`)."""
+    def point(self, pan: float, tilt: float, zoom: float, seconds: float = POINT_S, camera: int = 0) -> OperatorState:
+        """Send PTZ ``camera`` to ``pan``, ``tilt`` (rad), ``zoom`` for ``seconds`` (or until :meth:`release`)."""
         if not all(math.isfinite(v) for v in (pan, tilt, zoom, seconds)) or seconds <= 0 or zoom <= 0:
             raise ValueError(f"a manual pointing needs finite pan, tilt, a zoom > 0 and seconds > 0, got "
                              f"{pan}, {tilt}, {zoom}, {seconds}")
-        return self._update(point=(float(pan), float(tilt), float(zoom)), point_until=time.monotonic() + seconds)
+        return self._update(point=(float(pan), float(tilt), float(zoom)), point_until=time.monotonic() + seconds,
+                            point_camera=int(camera))
 
     def release(self) -> OperatorState:
         """End a manual pointing now."""

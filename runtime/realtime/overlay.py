@@ -90,23 +90,26 @@ def track_pixels(rig: Rig, x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np
     return px[:ELLIPSE_POINTS], px[-3], px[-2], px[-1]
 
 
-def draw_tracks(img: np.ndarray, rig: Rig, tracks, target: int | None) -> np.ndarray:
+def draw_tracks(img: np.ndarray, rig: Rig, tracks, targets: dict[int, str]) -> np.ndarray:
     """Draw each track in place: its 95 % floor-position ellipse at the feet, id, and velocity;
-    the target's head gets a bracket and the label TARGET."""
+    each target's head (``targets``: track id -> label, e.g. ``TARGET`` or the PTZs on it) gets a
+    bracket and its label."""
     for tr in tracks:
-        colour = ORANGE if tr.id == target else CYAN
+        target = tr.id in targets
+        colour = ORANGE if target else CYAN
         ellipse, foot, tip, head = track_pixels(rig, tr.x, tr.P)
         cv2.polylines(img, [ellipse], True, colour, 1, cv2.LINE_AA)
         cv2.arrowedLine(img, tuple(map(int, foot)), tuple(map(int, tip)), colour, 1, cv2.LINE_AA, tipLength=0.25)
         label = f"#{tr.id}" + (" face" if tr.captured else "")
         cv2.putText(img, label, (int(foot[0]) + 8, int(foot[1]) + 14), cv2.FONT_HERSHEY_SIMPLEX, 0.42, colour, 1,
                     cv2.LINE_AA)
-        if tr.id == target:
+        if target:
             x, y, s = int(head[0]), int(head[1]), 14
             for dx, dy in ((-1, -1), (1, -1), (-1, 1), (1, 1)):
                 cv2.line(img, (x + dx * s, y + dy * s), (x + dx * (s - 6), y + dy * s), ORANGE, 2)
                 cv2.line(img, (x + dx * s, y + dy * s), (x + dx * s, y + dy * (s - 6)), ORANGE, 2)
-            cv2.putText(img, "TARGET", (x - 22, y - s - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.4, ORANGE, 1, cv2.LINE_AA)
+            cv2.putText(img, targets[tr.id], (x - 22, y - s - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.4, ORANGE, 1,
+                        cv2.LINE_AA)
     return img
 
 
@@ -119,30 +122,37 @@ def _text(img, text, org, colour=WHITE, scale=0.45, thickness=1) -> None:
     cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, colour, thickness, cv2.LINE_AA)
 
 
-def compose_view(omni_img: np.ndarray, inset: np.ndarray | None, title: str, clock: str,
-                 lines: list[tuple[str, tuple[int, int, int]]], inset_label: str) -> np.ndarray:
+def compose_view(omni_img: np.ndarray, insets: list[tuple[np.ndarray | None, str]], title: str, clock: str,
+                 lines: list[tuple[str, tuple[int, int, int]]]) -> np.ndarray:
     """The operator's view (the paper's figure 1): the annotated omni frame on the left, and on the
-    right the foveal (PTZ) view on top of a status panel. ``lines`` are (text, colour) rows."""
+    right each PTZ's view (``insets``: (image or ``None``, label), in the rig's order; one fills the
+    panel's width, several are tiled two or three to a row) above a status panel. ``lines`` are
+    (text, colour) rows."""
     H, W = omni_img.shape[:2]
     pw = W // 2
-    ph = pw * 3 // 4
+    cols = 1 if len(insets) == 1 else 2 if len(insets) <= 4 else 3
+    iw = pw // cols
+    ih = iw * 3 // 4
     canvas = np.full((H, W + pw, 3), DARK, np.uint8)
     canvas[:, :W] = omni_img
     _text(canvas, title, (10, 20), WHITE, 0.5)
     _text(canvas, clock, (10, H - 12), WHITE, 0.45)
     cv2.circle(canvas, (W - 60, 16), 5, (230, 30, 30), -1, cv2.LINE_AA)
     _text(canvas, "LIVE", (W - 50, 21), (230, 30, 30), 0.45)
-    if inset is not None:
-        canvas[:ph, W:] = cv2.resize(inset, (pw, ph), interpolation=cv2.INTER_AREA)
-        c = (W + pw // 2, ph // 2)
-        cv2.drawMarker(canvas, c, (255, 255, 255), cv2.MARKER_CROSS, 16, 1, cv2.LINE_AA)
-    else:
-        cv2.putText(canvas, "no foveal feed", (W + pw // 2 - 60, ph // 2), cv2.FONT_HERSHEY_SIMPLEX, 0.5, GREY, 1,
-                    cv2.LINE_AA)
-    cv2.rectangle(canvas, (W, 0), (W + pw - 1, ph - 1), GREY, 1)
-    _text(canvas, inset_label, (W + 8, 18), WHITE, 0.45)
+    scale = 0.45 if cols == 1 else 0.35
+    for k, (inset, label) in enumerate(insets):
+        x0, y0 = W + (k % cols) * iw, (k // cols) * ih
+        if inset is not None:
+            canvas[y0:y0 + ih, x0:x0 + iw] = cv2.resize(inset, (iw, ih), interpolation=cv2.INTER_AREA)
+            c = (x0 + iw // 2, y0 + ih // 2)
+            cv2.drawMarker(canvas, c, (255, 255, 255), cv2.MARKER_CROSS, 16 // cols, 1, cv2.LINE_AA)
+        else:
+            cv2.putText(canvas, "no foveal feed", (x0 + iw // 2 - 60 // cols, y0 + ih // 2), cv2.FONT_HERSHEY_SIMPLEX,
+                        0.5 / cols, GREY, 1, cv2.LINE_AA)
+        cv2.rectangle(canvas, (x0, y0), (x0 + iw - 1, y0 + ih - 1), GREY, 1)
+        _text(canvas, label, (x0 + 8 // cols, y0 + 18 - 4 * (cols > 1)), WHITE, scale)
     cv2.line(canvas, (W, 0), (W, H), GREY, 1)
-    y = ph + 22
+    y = -(-len(insets) // cols) * ih + 22
     for text, colour in lines:
         cv2.putText(canvas, text, (W + 10, y), cv2.FONT_HERSHEY_SIMPLEX, 0.42, colour, 1, cv2.LINE_AA)
         y += 19

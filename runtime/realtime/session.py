@@ -44,6 +44,7 @@ from runtime.realtime.overlay import (
     track_pixels,
 )
 from runtime.realtime.perception import learn_from_frames, learning_step
+from runtime.realtime.ptz_link import PtzLink
 from runtime.realtime.sources import Capture
 
 
@@ -79,69 +80,97 @@ class VideoOut:
 class Annotator:
     """Draws the operator's view of each processed frame and hands it to ``sinks``.
 
-    ``foveal(frame, loop) -> (image | None, label)`` supplies the PTZ inset (the demo renders
-    it from the synthetic world at the emulated PTZ's actual position); ``None`` shows the
-    commanded PTZ state only.
+    ``fovea``: per PTZ (the rig's order), ``foveal(frame, loop) -> (image | None, label)`` supplies its
+    inset (the demo renders it from the synthetic world at the emulated PTZ's actual position), or
+    ``None``: the commanded PTZ state only.
     """
 
     rig: Rig
     title: str
-    foveal: Callable | None = None
+    fovea: list = field(default_factory=list)
     sinks: list = field(default_factory=list)
     loop: RealTimeLoop | None = None
     last: np.ndarray | None = None
-    #: the latest frame's annotated omni image and PTZ inset (with its label), apart (the console shows them)
+    #: the latest frame's annotated omni image and each PTZ's inset (with its label), apart (the console shows them)
     omni_view: np.ndarray | None = None
-    inset: tuple[np.ndarray | None, str] = (None, "PTZ")
+    insets: list[tuple[np.ndarray | None, str]] = field(default_factory=list)
 
     def __post_init__(self):
         self.r_range = polar_range(self.rig)
+        self.fovea = list(self.fovea) + [None] * (self.rig.ptz_count - len(self.fovea))
+        self.insets = [(None, _ptz_name(k, self.rig.ptz_count)) for k in range(self.rig.ptz_count)]
+
+    @property
+    def inset(self) -> tuple[np.ndarray | None, str]:
+        """The first PTZ's inset and label."""
+        return self.insets[0]
 
     def warm_up(self, blank: np.ndarray, dets) -> None:
-        """Compile the drawing's jitted parts (and the inset's) before the loop starts."""
+        """Compile the drawing's jitted parts (and the insets') before the loop starts."""
         draw_detections(blank, self.rig, dets, self.r_range)
         track_pixels(self.rig, np.array([1.0, 0.5, 0.1, 0.0]), 0.01 * np.eye(4))
-        if hasattr(self.foveal, "warm_up"):
-            self.foveal.warm_up()
+        for foveal in self.fovea:
+            if hasattr(foveal, "warm_up"):
+                foveal.warm_up()
 
-    def __call__(self, record, frame, dets, z, tracks, command, status) -> dict:
+    def __call__(self, record, frame, dets, z, tracks, commands, status) -> dict:
         """Draw the view of a processed frame (on the loop's drawing thread): ``tracks`` are the tracks
-        confirmed then, ``status`` the loop's counters then (:meth:`RealTimeLoop.status`)."""
-        loop = self.loop
+        confirmed then, ``commands`` each PTZ's, ``status`` the loop's counters then
+        (:meth:`RealTimeLoop.status`)."""
+        loop, K = self.loop, len(commands)
         img = draw_detections(frame.image, self.rig, dets, self.r_range)
-        draw_tracks(img, self.rig, tracks, command.track if command is not None else None)
-        inset, inset_label = (None, "PTZ")
-        if self.foveal is not None:
-            inset, inset_label = self.foveal(frame, loop)
+        targets: dict[int, str] = {}
+        for k, command in enumerate(commands):
+            if command is not None and command.track is not None:
+                targets[command.track] = "TARGET" if K == 1 else f"{targets.get(command.track, 'PTZ')} {k}"
+        draw_tracks(img, self.rig, tracks, targets)
+        self.insets = [foveal(frame, loop) if foveal is not None else (None, _ptz_name(k, K))
+                       for k, foveal in enumerate(self.fovea)]
         n, elapsed = status["frames"], max(status["elapsed"], 1e-9)
         lat = loop.timings.latency.recent(50) if len(loop.timings.latency) else loop.timings.compute.recent(50)
         lines = [(f"{n / elapsed:5.1f} fps   latency {np.median(lat) if lat.size else float('nan'):5.2f} ms", WHITE),
                  (f"tracks {len(tracks)}   faces captured {status['captures']}", WHITE)]
-        if command is not None:
-            who = "manual" if command.track is None else f"target #{command.track}"
-            lines.append((f"{who}  pan {math.degrees(command.pan):6.1f}  "
-                          f"tilt {math.degrees(command.tilt):5.1f}", ORANGE))
-            lines.append((f"zoom x{command.zoom:4.1f} ({loop.cfg.zoom_rule}, p={float(self.rig.p_contain):.2f})",
-                          ORANGE))
-            lines.append((f"sd pan {math.degrees(command.sd_pan):.2f}  tilt {math.degrees(command.sd_tilt):.2f} deg",
-                          YELLOW))
-        else:
-            lines.append(("no target", GREY))
-        if status["driver"] is not None:
-            c = status["driver"]
-            up = c["connected"]
-            lines.append((f"PTZ {'online' if up else 'OFFLINE'}  cmds {c['commands']}  err {c['errors']}  "
-                          f"reconn {c['reconnects']}", GREEN if up else RED))
+        for k, (command, camera) in enumerate(zip(commands, status["cameras"])):
+            lines.extend(_command_lines(command, loop.cfg.zoom_rule, float(self.rig.p_contain)) if K == 1
+                         else [_camera_line(k, command)])
+            c = camera["driver"]
+            if c is not None:
+                up = c["connected"]
+                lines.append((f"{_ptz_name(k, K)} {'online' if up else 'OFFLINE'}  cmds {c['commands']}  "
+                              f"err {c['errors']}  reconn {c['reconnects']}", GREEN if up else RED))
         counts = status["counts"]
         faults = counts["broken"] + counts["wrong_size"]
         lines.append((f"faults: broken {counts['broken']}  size {counts['wrong_size']}  "
                       f"stale {status['capture']['stale']}", RED if faults else GREY))
         clock = f"frame {frame.index:6d}   t {frame.stamp:8.2f} s"
-        self.omni_view, self.inset = img, (inset, inset_label)
-        self.last = compose_view(img, inset, self.title, clock, lines, inset_label)
+        self.omni_view = img
+        self.last = compose_view(img, self.insets, self.title, clock, lines)
         for sink in self.sinks:
             sink(self.last)
         return {}
+
+
+def _ptz_name(k: int, count: int) -> str:
+    return "PTZ" if count == 1 else f"PTZ {k}"
+
+
+def _command_lines(command, zoom_rule: str, p_contain: float) -> list[tuple[str, tuple[int, int, int]]]:
+    """The status panel's lines of a rig's one PTZ."""
+    if command is None:
+        return [("no target", GREY)]
+    who = "manual" if command.track is None else f"target #{command.track}"
+    return [(f"{who}  pan {math.degrees(command.pan):6.1f}  tilt {math.degrees(command.tilt):5.1f}", ORANGE),
+            (f"zoom x{command.zoom:4.1f} ({zoom_rule}, p={p_contain:.2f})", ORANGE),
+            (f"sd pan {math.degrees(command.sd_pan):.2f}  tilt {math.degrees(command.sd_tilt):.2f} deg", YELLOW)]
+
+
+def _camera_line(k: int, command) -> tuple[str, tuple[int, int, int]]:
+    """One status line of PTZ ``k`` of several."""
+    if command is None:
+        return (f"PTZ {k}: no target", GREY)
+    who = "manual" if command.track is None else f"#{command.track}"
+    return (f"PTZ {k}: {who}  pan {math.degrees(command.pan):6.1f}  tilt {math.degrees(command.tilt):5.1f}  "
+            f"x{command.zoom:4.1f}", ORANGE)
 
 
 def chain_hooks(*hooks) -> Callable:
@@ -155,13 +184,16 @@ def chain_hooks(*hooks) -> Callable:
     return on_frame
 
 
-def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=None, config: LoopConfig,
+def run_session(rig: Rig, source: Source, out: Path, *, links: list[PtzLink], config: LoopConfig,
                 paced: bool = True, background_frames: int | None = None, background_seconds: float | None = None,
                 video: bool = True, record: bool = False,
-                title: str = "omnijax", foveal: Callable | None = None, hooks: tuple = (), control_hooks: tuple = (),
+                title: str = "omnijax", fovea: tuple = (), hooks: tuple = (), control_hooks: tuple = (),
                 finish: Callable | None = None, extra: dict | None = None, screenshot_at: int | None = None,
                 console=None, mqtt=None) -> dict:
     """Run the loop on ``source`` and write the outputs to ``out`` (see the module docstring).
+
+    ``links``: one :class:`~runtime.realtime.ptz_link.PtzLink` per PTZ of ``rig`` (its driver, or none, and
+    its device profile); ``fovea``: per PTZ, its view for the operator's view (:class:`Annotator`).
 
     ``hooks`` are extra ``on_frame`` hooks (the demo's scorer), run on the drawing thread;
     ``control_hooks`` run on the control thread at their frame (fault injection); ``record`` writes
@@ -177,8 +209,8 @@ def run_session(rig: Rig, source: Source, out: Path, *, driver=None, profile=Non
     with staged_output(out) as stage, interrupted_during("while writing the outputs"):
         with interrupted_during("during start-up"):
             loop, annot, writer, recorder, first = _start(
-                rig, source, stage, driver=driver, profile=profile, config=config, paced=paced, n_bg=n_bg,
-                background_seconds=background_seconds, video=video, record=record, title=title, foveal=foveal,
+                rig, source, stage, links=links, config=config, paced=paced, n_bg=n_bg,
+                background_seconds=background_seconds, video=video, record=record, title=title, fovea=fovea,
                 hooks=hooks, control_hooks=control_hooks, screenshot_at=screenshot_at, console=console, mqtt=mqtt)
         setup_s = time.monotonic() - t0
         loop.install_signal_handlers()
@@ -224,8 +256,8 @@ def _source_counters(source) -> dict | None:
     return None
 
 
-def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: LoopConfig, paced: bool, n_bg: int,
-           background_seconds: float | None, video: bool, record: bool, title: str, foveal, hooks: tuple,
+def _start(rig: Rig, source: Source, stage: Path, *, links: list[PtzLink], config: LoopConfig, paced: bool, n_bg: int,
+           background_seconds: float | None, video: bool, record: bool, title: str, fovea: tuple, hooks: tuple,
            control_hooks: tuple, screenshot_at: int | None, console=None, mqtt=None):
     """Start-up of :func:`run_session`: the background, the detector, the writers, the loop, compiled."""
     W, H = rig.omni.image_size
@@ -238,22 +270,24 @@ def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: Lo
                          f"expected {W}x{H} (omni.image_size of the rig)")
     detector = build_detector(rig)
     writer = VideoOut(stage, source.fps or 25.0, (W + W // 2, H)) if video else None
-    annot = Annotator(rig, title, foveal, [writer.write] if writer else [])
+    annot = Annotator(rig, title, list(fovea), [writer.write] if writer else [])
     capture = Capture(source, paced=paced, frames=frames, first_index=first, shape=(H, W, 3))
     drawn = video or screenshot_at is not None or console is not None
-    loop = RealTimeLoop(rig, detector, bg, capture, driver, profile, config, stage / "log.jsonl",
+    loop = RealTimeLoop(rig, detector, bg, capture, links, config, stage / "log.jsonl",
                         on_frame=chain_hooks(*hooks, annot if drawn else None),
                         on_control=chain_hooks(*control_hooks) if control_hooks else None,
                         operator=console.operator if console is not None else None, learning_frames=n_bg)
     annot.loop = loop
     loop.learning = {"frames": n_bg, "seconds": seconds, "step": step, "frame_indices": used}
-    live = console.attach(loop, rig, annot, stage, driver, profile) if console is not None else None
+    live = console.attach(loop, rig, annot, stage, links[0].driver, links[0].profile) if console is not None else None
     sinks = tuple(s for s in (live.event if live is not None else None, mqtt) if s is not None)
-    loop.events = EventLog(stage, face_image=lambda: annot.inset[0], sinks=sinks)
+    # a face is saved from the PTZ that dwelt on the person (the first one's where the track does not say)
+    loop.events = EventLog(stage, face_image=lambda tr: annot.insets[tr.extra.get("captured_by", 0)][0],
+                           sinks=sinks)
     if console is not None:
         console.events = loop.events
 
-    def shoot(record, frame, dets, z, tracks, command, status):
+    def shoot(record, frame, dets, z, tracks, commands, status):
         if screenshot_at is not None and status["frames"] == screenshot_at and annot.last is not None:
             cv2.imwrite(str(stage / "view.png"), cv2.cvtColor(annot.last, cv2.COLOR_RGB2BGR))
         return {}

@@ -10,20 +10,25 @@ Per processed frame (an ``on_frame`` hook of :class:`~runtime.loop.RealTimeLoop`
   ``false_alarm_rate`` = false alarms / detections (also given per frame). ``foot_error_m``:
   floor distance between each matched detection (eq 1 with the configured rig) and the true
   foot.
-- containment: each frame with a target gives one trial per zoom rule: the commanded pan and
-  tilt with that rule's zoom, against the targeted person's true head at the time the command
-  was predicted for (interpolated between frames), in the world's *true* rig
-  (:func:`omnijax._foveal.head_in_view`: the whole head sphere inside the frame). The target is
-  the true person nearest the target track (within ``gate_m``; otherwise the trial fails).
+- containment: each frame with a target gives one trial per zoom rule (with several PTZs, one per
+  PTZ with a target): the commanded pan and tilt with that rule's zoom, against the targeted
+  person's true head at the time the command was predicted for (interpolated between frames), in
+  the world's *true* rig of that PTZ (:func:`omnijax._foveal.head_in_view`: the whole head sphere
+  inside the frame). The target is the true person nearest the target track (within ``gate_m``;
+  otherwise the trial fails).
   ``face_px``: the head's width in the foveal image at that zoom and the true distance. Each
   rule also reports the mean containment probability it predicted, and the rate over the
   trials where it could reach p_contain at all (its widest zoom sufficed).
 - what a user of the PTZ sees: ``rate`` is over *all* target-frames; ``no_person_share`` the
   share of target-frames aimed at a track matching no person; ``rate_person_frames`` the frames
-  with the head framed over all frames with someone in the image (frames where the loop held, no
-  target, count as not framed; ``held`` counts them by the loop's reason: ``untrusted``,
+  with a head framed (``framed_frames``: by some PTZ) over all frames with someone in the image
+  (frames where the loop held, no target, count as not framed; ``held`` counts them by the loop's
+  reason: ``untrusted``,
   ``unframeable``, or ``no_track``); ``face_coverage``: per person, the share of their frames in
-  the image in which the PTZ framed their head (each rule's zoom at the commanded pan/tilt).
+  the image in which some PTZ framed their head (each rule's zoom at the commanded pan/tilt; a
+  frame counts once however many PTZs framed them).
+- per PTZ (``cameras``): its target-frames, the share of them with the head framed
+  (``framed_rate``, the driving rule's; ``rules`` has both), those aimed at no person, the median face.
 
 Trials are scored in batches of :data:`BATCH` and only counts and histograms are kept, so the
 memory stays flat however long the demo runs.
@@ -45,7 +50,7 @@ BATCH, FACE_MAX = 256, 4096
 
 
 @eqx.filter_jit
-def _trials(true_rig, pan, tilt, zoom, head, R_h):
+def _trials(true_rig, pan, tilt, zoom, head, R_h):  # true_rig: one PTZ's
     """head_in_view over trials (n,) and rules (n, r): inside (n, r), face_px (n, r)."""
     def one(p, t, z, h, r):
         v = jax.vmap(lambda zz: head_in_view(true_rig, p, t, zz, h, r))(z)
@@ -58,6 +63,8 @@ class DemoScorer:
 
     def __init__(self, world, source, gate_m: float = 0.5):
         self.world, self.source, self.gate_m = world, source, gate_m
+        self.true_rigs = [world.true_rig.ptz(k) for k in range(world.true_rig.ptz_count)]
+        K = len(self.true_rigs)
         self.fps = float(world.scenario.fps)
         self.positions = np.asarray(world.paths.position)  # (t, p, 2)
         self.head_z = np.asarray(world.people.head_z)
@@ -73,12 +80,19 @@ class DemoScorer:
         self.p_contain = float(world.rig.p_contain)
         n_people = self.positions.shape[1]
         self.in_view = np.zeros(n_people, int)  # frames each person's foot is in the image
-        self.framed = np.zeros((nr, n_people), int)  # frames each person's head was framed, per rule
+        self.framed = np.zeros((nr, n_people), int)  # frames each person's head was framed (by some PTZ), per rule
+        self.last_framed = np.full((nr, n_people), -1)  # the last frame counted there
+        self.framed_frames, self.last_framed_frame = np.zeros(nr, int), np.full(nr, -1)  # frames with a head framed
+        # per PTZ: target-frames, those on no person, framed per rule, face widths
+        self.cam_trials, self.cam_no_person = np.zeros(K, int), np.zeros(K, int)
+        self.cam_contained, self.cam_feasible = np.zeros((K, nr), int), np.zeros((K, nr), int)
+        self.cam_feasible_contained = np.zeros((K, nr), int)
+        self.cam_face_hist = np.zeros((K, nr, FACE_MAX + 1), int)
         self.person_frames = 0  # frames with someone in the image
         self.held = {"untrusted": 0, "unframeable": 0, "no_track": 0}  # of those, frames without a target
         self.last_target_error: float | None = None
 
-    def __call__(self, record, frame, dets, z, tracks, command, *_) -> dict:
+    def __call__(self, record, frame, dets, z, tracks, commands, *_) -> dict:
         truth = self.source.take_truth(frame.index)
         if truth is None:
             return {}
@@ -104,14 +118,18 @@ class DemoScorer:
         self.person_frames += bool(len(inside))
         if record.get("operator") in ("point", "paused"):  # the operator had the PTZ: not the loop's choice
             return out
-        if command is None and len(inside):
+        if all(command is None for command in commands) and len(inside):
             self.held[record.get("held") or "no_track"] += 1
-        if command is not None:
-            out["truth"]["target_person"] = self._add_trial(frame.index, command, tracks)
+        people = [None if command is None else self._add_trial(frame.index, k, command, tracks)
+                  for k, command in enumerate(commands)]
+        if len(commands) == 1 and commands[0] is not None:
+            out["truth"]["target_person"] = people[0]
             out["truth"]["target_error_m"] = self.last_target_error
+        elif len(commands) > 1:
+            out["truth"]["target_people"] = people
         return out
 
-    def _add_trial(self, index: int, command, tracks) -> int | None:
+    def _add_trial(self, index: int, camera: int, command, tracks) -> int | None:
         xy = next((tr.position for tr in tracks if tr.id == command.track), None)
         pos_now = self.positions[min(index, len(self.positions) - 1)]
         person = None
@@ -122,6 +140,7 @@ class DemoScorer:
                 person = int(np.argmin(d))
         if person is None:
             self.no_person += 1
+            self.cam_no_person[camera] += 1
             head, R_h = np.array([0.0, 0.0, -100.0]), 0.1  # below the floor: never in view
         else:
             k = min(max(command.t_predicted * self.fps, 0.0), len(self.positions) - 1.0)
@@ -134,20 +153,43 @@ class DemoScorer:
         prob = (np.array([float(aimed.zooms[r].probability) for r in RULES]) if aimed is not None
                 else np.full(len(RULES), np.nan))
         self.batch.append((command.pan, command.tilt, [command.zooms[r] for r in RULES], head, R_h, prob,
-                           -1 if person is None else person))
+                           -1 if person is None else person, camera, index))
         if len(self.batch) == BATCH:
             self._score_batch()
         return person
 
     def _score_batch(self) -> None:
-        n = len(self.batch)
-        if not n:
+        """Score the trials kept (each PTZ's with its true rig, padded to one compiled shape)."""
+        if not self.batch:
             return
-        pad = self.batch + [self.batch[-1]] * (BATCH - n)
-        pan, tilt, zoom, head, R_h, prob, person = (np.array(v, float) for v in zip(*pad))
-        inside, px = (np.asarray(a)[:n] for a in _trials(self.world.true_rig, jnp.asarray(pan), jnp.asarray(tilt),
-                                                           jnp.asarray(zoom), jnp.asarray(head), jnp.asarray(R_h)))
-        zoom, prob, person = zoom[:n], prob[:n], person[:n].astype(int)
+        inside = np.zeros((len(self.batch), len(RULES)), bool)
+        for k in range(len(self.true_rigs)):
+            mine = [m for m, b in enumerate(self.batch) if b[7] == k]
+            if mine:
+                inside[mine] = self._score(k, [self.batch[m] for m in mine])
+        # face coverage: the batch is in frame order; a person framed by several PTZs in one frame counts once
+        person = np.array([b[6] for b in self.batch], int)
+        frame = np.array([b[8] for b in self.batch], int)
+        for i in range(len(RULES)):
+            hit = inside[:, i] & (person >= 0)
+            for p, f in zip(person[hit], frame[hit]):
+                if self.last_framed[i, p] != f:
+                    self.framed[i, p] += 1
+                    self.last_framed[i, p] = f
+                if self.last_framed_frame[i] != f:
+                    self.framed_frames[i] += 1
+                    self.last_framed_frame[i] = f
+        self.batch.clear()
+
+    def _score(self, camera: int, batch: list[tuple]) -> np.ndarray:
+        """Score PTZ ``camera``'s trials ``batch``; whether each framed the head (n, rules)."""
+        n = len(batch)
+        pad = batch + [batch[-1]] * (BATCH - n)
+        pan, tilt, zoom, head, R_h, prob, *_ = (np.array(v, float) for v in zip(*pad))
+        inside, px = (np.asarray(a)[:n] for a in _trials(self.true_rigs[camera], jnp.asarray(pan),
+                                                           jnp.asarray(tilt), jnp.asarray(zoom), jnp.asarray(head),
+                                                           jnp.asarray(R_h)))
+        zoom, prob = zoom[:n], prob[:n]
         bins = np.clip(np.round(px), 0, FACE_MAX).astype(int)
         feasible = prob >= self.p_contain - 1e-9
         self.trials += n
@@ -156,12 +198,15 @@ class DemoScorer:
         self.feasible_contained += (feasible & inside).sum(0)
         self.prob_sum += np.nan_to_num(prob).sum(0)
         self.zoom_sum += zoom.sum(0)
+        self.cam_trials[camera] += n
+        self.cam_contained[camera] += inside.sum(0)
+        self.cam_feasible[camera] += feasible.sum(0)
+        self.cam_feasible_contained[camera] += (feasible & inside).sum(0)
         for i in range(len(RULES)):
             self.face_hist[i] += np.bincount(bins[:, i], minlength=FACE_MAX + 1)
             self.face_hist_in[i] += np.bincount(bins[inside[:, i], i], minlength=FACE_MAX + 1)
-            hit = inside[:, i] & (person >= 0)
-            self.framed[i] += np.bincount(person[hit], minlength=self.framed.shape[1])
-        self.batch.clear()
+            self.cam_face_hist[camera, i] += np.bincount(bins[:, i], minlength=FACE_MAX + 1)
+        return inside
 
     def summary(self, p_contain: float, rule: str) -> dict:
         """The demo's scores for ``summary.json``; ``rate`` and ``median`` at the top are those of
@@ -187,7 +232,8 @@ class DemoScorer:
                 "predicted_mean": self.prob_sum[i] / n, "zoom_mean": self.zoom_sum[i] / n,
                 "feasible_trials": int(self.feasible[i]),
                 "rate_feasible": self.feasible_contained[i] / self.feasible[i] if self.feasible[i] else None,
-                "rate_person_frames": self.contained[i] / self.person_frames if self.person_frames else None}
+                "framed_frames": int(self.framed_frames[i]),
+                "rate_person_frames": self.framed_frames[i] / self.person_frames if self.person_frames else None}
             face["rules"][r] = {"median": _hist_median(self.face_hist[i]),
                                 "median_contained": _hist_median(self.face_hist_in[i])}
         if n:
@@ -195,7 +241,22 @@ class DemoScorer:
             cont["rate_person_frames"] = cont["rules"][rule]["rate_person_frames"]
             face["median"] = face["rules"][rule]["median"]
         return {"detection": det, "foot_error_m": foot, "containment": cont, "face_px": face,
-                "face_coverage": self._coverage(rule)}
+                "face_coverage": self._coverage(rule), "cameras": self._cameras(rule)}
+
+    def _cameras(self, rule: str) -> list[dict]:
+        """Per PTZ: ``id``, ``target_frames``, ``framed_rate`` (``rule``'s, over its target-frames), ``rules``
+        (each rule's ``rate``, ``contained``, ``rate_feasible``), ``no_person``, ``face_px_median``."""
+        out = []
+        i = RULES.index(rule)
+        for k, n in enumerate(self.cam_trials):
+            contained, feasible = self.cam_contained[k], self.cam_feasible[k]
+            rules = {r: {"rate": contained[j] / n if n else None, "contained": int(contained[j]),
+                         "rate_feasible": self.cam_feasible_contained[k, j] / feasible[j] if feasible[j] else None}
+                     for j, r in enumerate(RULES)}
+            out.append({"id": k, "rule": rule, "target_frames": int(n), "framed_rate": rules[rule]["rate"],
+                        "rules": rules, "no_person": int(self.cam_no_person[k]),
+                        "face_px_median": _hist_median(self.cam_face_hist[k, i])})
+        return out
 
     def _coverage(self, rule: str) -> dict:
         """Per person (seen in the image at all), the share of their frames in the image with their head

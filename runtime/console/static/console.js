@@ -4,7 +4,7 @@
 
 const TOKEN = new URLSearchParams(location.search).get("token");
 const $ = (id) => document.getElementById(id);
-const state = { mode: "select", status: null, zones: [], drawing: [], calibration: null, zonesVersion: -1 };
+const state = { mode: "select", status: null, zones: [], drawing: [], calibration: null, zonesVersion: -1, views: 1 };
 const COLOURS = { ignore: "rgba(255, 80, 80, %)", priority: "rgba(80, 220, 80, %)" };
 
 function say(text, ok = false) {
@@ -38,6 +38,35 @@ function live(img, name, every) {
   next();
 }
 
+// every PTZ after the first gets a view of its own (GET /api/view/ptzK.jpg), made once the status says how many
+function moreViews(cameras) {
+  if (cameras.length <= state.views) return;
+  for (let k = state.views; k < cameras.length; k++) {
+    const box = document.createElement("div"), img = document.createElement("img"), label = document.createElement("div");
+    box.className = "view";
+    img.id = "ptz" + k;
+    img.alt = "PTZ " + k + "'s view";
+    label.className = "view-label";
+    label.id = "ptz-label" + k;
+    box.append(img, label);
+    $("more-views").appendChild(box);
+    live(img, "ptz" + k, 300);
+  }
+  const pick = $("camera");
+  pick.innerHTML = "";
+  cameras.forEach((c) => {
+    const o = document.createElement("option");
+    o.value = c.id;
+    o.textContent = c.id;
+    pick.appendChild(o);
+  });
+  $("camera-pick").hidden = false;
+  $("cameras-row").hidden = false;
+  state.views = cameras.length;
+}
+
+const camera = () => (state.views > 1 ? { camera: Number($("camera").value) } : {});
+
 function sizeOverlay() {
   const img = $("omni"), c = $("overlay");
   if (img.naturalWidth && (c.width !== img.naturalWidth || c.height !== img.naturalHeight)) {
@@ -66,6 +95,13 @@ function showStatus(s) {
   $("status-tracks").textContent = s.tracks.length + (s.tracks.length ? ": " + s.tracks.map(
     (t) => "#" + t.id + (t.trusted ? "" : "?") + (t.captured ? " (face)" : "")).join(", ") : "");
   $("status-target").textContent = s.manual ? "manual" : (s.target === null ? "none" : String(s.target));
+  const cams = s.cameras || [];
+  moreViews(cams);
+  if (cams.length > 1) {
+    $("status-cameras").textContent = cams.map((c) => c.id + ": " + (c.manual ? "manual" : c.target === null
+      ? (c.held || "none") : "#" + c.target + " x" + fmt(c.zoom, 1))).join(", ");
+    cams.slice(1).forEach((c) => { const l = $("ptz-label" + c.id); if (l) l.textContent = c.view || ""; });
+  }
   $("status-held").textContent = s.held || "-";
   $("ptz-label").textContent = s.ptz_view || "";
   const p = s.ptz || {};
@@ -226,7 +262,7 @@ async function click(ev) {
     await post("/api/target", { track: best.id });
     say("target: #" + best.id, true);
   } else {
-    const r = await post("/api/point", { x, y });
+    const r = await post("/api/point", { x, y, ...camera() });
     say("PTZ pointed at the floor there: pan " + r.pan_deg.toFixed(1) + ", tilt " + r.tilt_deg.toFixed(1), true);
   }
 }
@@ -250,7 +286,7 @@ async function key(ev) {
   const move = moves[ev.key];
   if (!move) return;
   ev.preventDefault();
-  const r = await post("/api/ptz", { ...move, seconds: 600 });
+  const r = await post("/api/ptz", { ...move, seconds: 600, ...camera() });
   say("PTZ pan " + r.pan_deg.toFixed(2) + ", tilt " + r.tilt_deg.toFixed(2) + ", zoom x" + r.zoom.toFixed(2), true);
 }
 
@@ -298,7 +334,7 @@ function wire() {
   $("auto").onclick = () => post("/api/target", { track: null }).then(() => say("automatic target", true)).catch(() => {});
   $("pause").onclick = () => post("/api/pause", { paused: true }).then(() => say("paused", true)).catch(() => {});
   $("resume").onclick = () => post("/api/pause", { paused: false }).then(() => say("resumed", true)).catch(() => {});
-  $("home").onclick = () => post("/api/home").then(() => say("PTZ sent home", true)).catch(() => {});
+  $("home").onclick = () => post("/api/home", camera()).then(() => say("PTZ sent home", true)).catch(() => {});
   $("release").onclick = () => post("/api/release").then(() => say("manual pointing ended", true)).catch(() => {});
   $("cal-fit").onclick = () => {
     $("cal-result").textContent = "fitting ...";

@@ -27,7 +27,7 @@ def test_events_are_logged_and_published(tmp_path):
     with Broker() as broker:
         sub = Subscriber(broker.port, "home/hall/#")
         mqtt = MqttPublisher(f"{broker.url}/home/hall").start()
-        log = EventLog(tmp_path, face_image=lambda: face, sinks=(mqtt,))
+        log = EventLog(tmp_path, face_image=lambda _track: face, sinks=(mqtt,))
         script = [[walker, blob]] * 5
         _frames(log, script[:2])
         walker.trusted = True

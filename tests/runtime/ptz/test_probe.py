@@ -108,16 +108,14 @@ def test_cli_probe_of_a_silent_camera_is_exit_1(capsys):
 
 def test_the_loop_adds_the_profiles_command_latency_to_the_slew_time():
     """What ``calibrate`` writes is what the loop predicts arrival with: latency + slowest axis."""
-    from types import SimpleNamespace
-
     from runtime.ptz import parse_profile
-    from runtime.realtime.loop import RealTimeLoop
+    from runtime.realtime.ptz_link import PtzLink
     from tests.runtime.ptz.helpers import profile_mapping
 
     m = profile_mapping("visca")
     m["link"] = {**m.get("link", {}), "command_latency_s": 0.25}
     profile = parse_profile(m)
-    rates = (float(profile.pan.slew_deg_s()), float(profile.tilt.slew_deg_s()))
-    state = SimpleNamespace(profile=profile, sent=(0.0, 0.0, 1.0), _rates=rates)
-    t = RealTimeLoop._slew_time(state, (math.radians(50.0), 0.0, 1.0))
-    assert t == pytest.approx(0.25 + 50.0 / rates[0])
+    link = PtzLink(0, None, profile)
+    link.sent = (0.0, 0.0, 1.0)
+    t = link.slew_time((math.radians(50.0), 0.0, 1.0))
+    assert t == pytest.approx(0.25 + 50.0 / link.rates[0])

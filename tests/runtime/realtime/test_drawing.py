@@ -13,7 +13,7 @@ from runtime.realtime.drawing import OffPath
 
 
 def _item(k):
-    return {"record": {"frame": k}, "frame": k, "dets": None, "z": None, "tracks": [], "command": None,
+    return {"record": {"frame": k}, "frame": k, "dets": None, "z": None, "tracks": [], "commands": [None],
             "status": {"frames": k}}
 
 
@@ -21,7 +21,7 @@ def test_a_stalled_hook_costs_the_control_thread_nothing(tmp_path):
     gate = threading.Event()
     seen = []
 
-    def hook(record, frame, dets, z, tracks, command, status):
+    def hook(record, frame, dets, z, tracks, commands, status):
         gate.wait(10)  # the drawing thread is stuck (a slow inset, a slow disk)
         seen.append(frame)
         return {"drawn": True}

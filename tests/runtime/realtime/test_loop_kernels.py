@@ -83,9 +83,9 @@ def test_control_step_is_the_tracker_and_the_aim_pipeline_fused(paper_detector, 
     assert np.asarray(c.aim_ok).tolist() == [True] + [False] * (len(valid) - 1) and int(c.aim_slot[0]) == 0
     now = aim_at_floor(paper_rig, jnp.asarray(tr.x[:2]), jnp.asarray(tr.P[:2, :2]), ZOOM_RULES).pointing
     lead = 0.03 + float(pan_tilt_slew_s(now.pan, now.tilt, *sent, 300.0, 125.0))
-    assert lead > 0.0 and float(c.lead[0]) == pytest.approx(lead, rel=1e-12)
+    assert lead > 0.0 and float(c.lead[0, 0]) == pytest.approx(lead, rel=1e-12)
     xp, Pp = kalman.predict(jnp.asarray(tr.x), jnp.asarray(tr.P), lead, 1.5)
     want = aim_at_floor(paper_rig, xp[:2], Pp[:2, :2], ZOOM_RULES)
-    got = jax.tree.map(lambda a: a[0], c.aims)
+    got = jax.tree.map(lambda a: a[0, 0], c.aims)  # the rig's one PTZ, the first confirmed track
     for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(want)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-12)

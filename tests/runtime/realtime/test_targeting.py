@@ -222,25 +222,23 @@ def test_settling_runs_on_the_frames_clock_not_the_wall_clock(monkeypatch):
     from types import SimpleNamespace as NS
 
     from runtime.ptz import default_profile
-    from runtime.realtime import loop as loop_module
-    from runtime.realtime.loop import Command, RealTimeLoop
+    from runtime.realtime import ptz_link as link_module
+    from runtime.realtime.loop import Command
+    from runtime.realtime.ptz_link import PtzLink
 
     wall = iter(np.random.default_rng(0).uniform(0, 1e6, 1000))
-    monkeypatch.setattr(loop_module, "time", NS(monotonic=lambda: float(next(wall)), sleep=lambda _s: None))
-    loop = RealTimeLoop.__new__(RealTimeLoop)
-    loop.driver, loop.profile, loop.sent, loop.sent_at = None, default_profile("visca"), None, None
-    loop.counts = {"commands_sent": 0}
-    loop._rates = (float(loop.profile.pan.slew_deg_s()), float(loop.profile.tilt.slew_deg_s()))
-    assert not loop._settled(0.0)
-    loop._send(Command(track=1, pan=0.0, tilt=-0.5, zoom=1.0, zooms={}, sd_pan=0.01, sd_tilt=0.01, sent=True,
-                       t_predicted=0.0), stamp=0.0)
+    monkeypatch.setattr(link_module, "time", NS(monotonic=lambda: float(next(wall)), sleep=lambda _s: None))
+    link = PtzLink(0, None, default_profile("visca"))
+    assert not link.settled(0.0)
+    link.send(Command(track=1, pan=0.0, tilt=-0.5, zoom=1.0, zooms={}, sd_pan=0.01, sd_tilt=0.01, sent=True,
+                      t_predicted=0.0), stamp=0.0)
     to = (math.pi / 2, -0.5, 1.0)
-    slew = loop._slew_time(to)
+    slew = link.slew_time(to)
     assert slew > 0.1
-    loop._send(Command(track=1, pan=to[0], tilt=to[1], zoom=to[2], zooms={}, sd_pan=0.01, sd_tilt=0.01, sent=True,
-                       t_predicted=10.0), stamp=10.0)
-    assert not loop._settled(10.0 + slew - 1e-6)
-    assert loop._settled(10.0 + slew)
+    link.send(Command(track=1, pan=to[0], tilt=to[1], zoom=to[2], zooms={}, sd_pan=0.01, sd_tilt=0.01, sent=True,
+                      t_predicted=10.0), stamp=10.0)
+    assert not link.settled(10.0 + slew - 1e-6)
+    assert link.settled(10.0 + slew)
 
 
 def test_a_track_that_stops_on_a_ghost_site_loses_trust_and_regains_it_by_walking_on():

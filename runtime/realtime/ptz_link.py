@@ -1,0 +1,101 @@
+"""One PTZ as the real-time loop drives it: its driver and device profile, the last command sent, when
+the PTZ should be there, and the frame-to-wire latency of its commands.
+
+The loop holds one :class:`PtzLink` per PTZ of the rig, in the rig's order. Arrival is estimated on
+the frames' own clock (the frame's stamp plus the profile's command latency and slew time), never
+the wall clock, so that a run that processes every frame (``--pace all``) makes the same choices
+every time.
+"""
+
+from __future__ import annotations
+
+import time
+
+import jax
+import jax.numpy as jnp
+
+from runtime.realtime.control import Slew, pan_tilt_slew_s
+
+_slew_s = jax.jit(pan_tilt_slew_s)
+
+
+class PtzLink:
+    """PTZ ``index`` of the rig: ``driver`` (``None``: commands are computed and logged only) and its
+    device ``profile`` (``None``: unknown, no slew-time prediction)."""
+
+    def __init__(self, index: int, driver, profile):
+        self.index, self.driver, self.profile = index, driver, profile
+        self.rates = ((float(profile.pan.slew_deg_s()), float(profile.tilt.slew_deg_s())) if profile is not None
+                      else (1.0, 1.0))
+        #: the last command sent (pan, tilt rad, zoom), when (``time.monotonic()``) and for which track
+        self.sent: tuple[float, float, float] | None = None
+        self.sent_at: float | None = None
+        self.sent_track: int | None = None
+        #: the frame stamp (s) by which the PTZ should have reached :attr:`sent`
+        self.arrive_at = 0.0
+        self.commands = 0
+        self._pending: dict[int, float] = {}  # driver sequence number -> frame available time
+
+    def slew(self) -> Slew:
+        """What the control call's head prediction needs of this PTZ (scalars; the loop stacks them)."""
+        sent, profile = self.sent, self.profile
+        return Slew(known=jnp.asarray(sent is not None and profile is not None),
+                    pan=jnp.asarray(sent[0] if sent else 0.0), tilt=jnp.asarray(sent[1] if sent else 0.0),
+                    pan_deg_s=jnp.asarray(self.rates[0]), tilt_deg_s=jnp.asarray(self.rates[1]),
+                    latency_s=jnp.asarray(profile.link.command_latency_s if profile is not None else 0.0))
+
+    def warm_up(self) -> None:
+        """Compile the slew-time estimate."""
+        _slew_s(0.0, 0.0, 0.0, 0.0, *self.rates).block_until_ready()
+
+    def settled(self, stamp: float) -> bool:
+        """Whether the PTZ should have reached the last command by the frame stamped ``stamp``."""
+        if self.sent_at is None or self.sent is None:
+            return False
+        return stamp >= self.arrive_at
+
+    def slew_time(self, target: tuple[float, float, float]) -> float:
+        """Seconds the PTZ needs from the last command to ``target``: the device profile's command latency,
+        then its slew rates and zoom speed."""
+        if self.profile is None or self.sent is None:
+            return 0.0
+        pan_tilt = float(_slew_s(target[0], target[1], self.sent[0], self.sent[1], *self.rates))
+        zp = self.profile.zoom
+        z_span = max(zp.position) - min(zp.position)
+        d_zoom = abs(self.profile.zoom_position(target[2]) - self.profile.zoom_position(self.sent[2])) / z_span
+        return self.profile.link.command_latency_s + max(pan_tilt, d_zoom * zp.seconds_full_range)
+
+    def send(self, cmd, stamp: float, frame_t: float | None = None) -> None:
+        """Hand ``cmd`` (a :class:`~runtime.realtime.loop.Command`) to the driver; the PTZ is expected there
+        its slew time after the frame ``stamp``. ``frame_t``: when the frame became available
+        (``time.monotonic()``), for the latency to the bytes written."""
+        if self.driver is not None:
+            self.driver.set_target(cmd.pan, cmd.tilt, cmd.zoom)
+            time.sleep(0)  # hand the GIL to the driver's worker now, so that the bytes go out at once
+            if frame_t is not None:
+                self._pending[self.driver.sequence] = frame_t
+        self.arrive_at = stamp + self.slew_time((cmd.pan, cmd.tilt, cmd.zoom))
+        self.sent = (cmd.pan, cmd.tilt, cmd.zoom)
+        self.sent_at = time.monotonic()
+        self.sent_track = cmd.track
+        self.commands += 1
+
+    def take_latencies(self) -> list[float]:
+        """Frame-to-wire latencies (ms) of the targets the driver has written since the last call
+        (superseded ones never are)."""
+        if self.driver is None:
+            return []
+        out = []
+        for seq, t_write in self.driver.take_writes():
+            t_frame = self._pending.pop(seq, None)
+            if t_frame is not None:
+                out.append(1e3 * (t_write - t_frame))
+            for k in [k for k in self._pending if k < seq]:
+                del self._pending[k]
+        return out
+
+    def link_status(self) -> dict | None:
+        """The driver's link state and counters (``None``: no driver)."""
+        if self.driver is None:
+            return None
+        return {"connected": self.driver.connected, **self.driver.counters}
