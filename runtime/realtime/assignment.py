@@ -125,6 +125,10 @@ class CameraAssigner:
         self.held: list[str | None] = [None] * n_cameras
         #: frames on which two PTZs were on one person while a framable person had none (0 by construction)
         self.doubled_while_waiting = 0
+        #: each covered person's PTZ in charge (track id -> PTZ): the first round's; a change is a hand-off
+        self.primary: dict[int, int] = {}
+        #: per PTZ, whether it holds on to a person whose track missed its detection this frame
+        self.holding: list[bool] = [False] * n_cameras
         #: ``priority(xy) -> bool``: whether a floor point (m) lies in a priority zone (``None``: no zones)
         self.priority: Callable[[np.ndarray], bool] | None = None
 
@@ -145,32 +149,42 @@ class CameraAssigner:
 
     def choose(self, t: float, tracks: list[Track], settled: list[bool],
                pairs: Callable[[list[Track]], PairValues], manual: int | None = None,
-               paused: bool = False, free: list[bool] | None = None) -> list[Track | None]:
+               paused: bool = False, free: list[bool] | None = None, alive: list[Track] = ()) -> list[Track | None]:
         """Each PTZ's target at time ``t`` (the frame's stamp), ``None`` where it has none (``held`` says
-        why). ``tracks``: the confirmed tracks; ``settled[c]``: whether PTZ c has reached its last command;
-        ``pairs(candidates)``: their :class:`PairValues`; ``manual``: the operator's chosen track (kept while
-        some PTZ can frame it, trusted or not); ``paused``: no targets; ``free[c]``: False for a PTZ the
-        operator points by hand (left out)."""
+        why). ``tracks``: the confirmed tracks (matched this frame: those the control call aimed at);
+        ``settled[c]``: whether PTZ c has reached its last command; ``pairs(candidates)``: their
+        :class:`PairValues`; ``manual``: the operator's chosen track (kept while some PTZ can frame it,
+        trusted or not); ``paused``: no targets; ``free[c]``: False for a PTZ the operator points by hand
+        (left out); ``alive``: every track the tracker still holds. A PTZ whose person's track missed its
+        detection this frame but is still alive keeps them (``holding[c]``: it stays where it was sent)."""
         K = self.n_cameras
-        free = [True] * K if free is None else free
-        self._dwell(t, tracks, settled)
+        free = [True] * K if free is None else list(free)
+        live = {tr.id: tr for tr in [*alive, *tracks]}
+        self._dwell(t, live, settled)
+        confirmed = {tr.id for tr in tracks}
+        self.holding = [f and not paused and cam.track in live and cam.track not in confirmed
+                        for f, cam in zip(free, self.cameras)]
         present = bool(tracks)
         trusted = self.candidates(t, tracks)
         chosen = next((tr for tr in tracks if tr.id == manual), None) if manual is not None else None
         cands = trusted + ([chosen] if chosen is not None and chosen not in trusted else [])
-        previous = [cam.track for cam in self.cameras]
+        previous = dict(self.primary)
+        targets: list[Track | None] = [live[cam.track] if h else None for cam, h in zip(self.cameras, self.holding)]
+        primary = {cam.track: c for c, (cam, h) in enumerate(zip(self.cameras, self.holding))
+                   if h and previous.get(cam.track) == c}
+        assignable = [f and not h for f, h in zip(free, self.holding)]
         if paused or not cands:
-            targets = [None] * K
             why = "paused" if paused and present else "untrusted" if present else None
-            self.held = [why if f else None for f in free]
+            self.held = [why if f else None for f in assignable]
         else:
             for tr in cands:
                 tr.extra.setdefault("last_framed", t)
             pv = pairs(cands)
-            allowed = pv.framable & np.asarray(free)[:, None]
-            cols = self._assign(t, cands, pv, allowed, chosen)
-            targets = [cands[j] if j >= 0 else None for j in cols]
-            self.held = [None if tr is not None or not f else "unframeable" for tr, f in zip(targets, free)]
+            allowed = pv.framable & np.asarray(assignable)[:, None]
+            first, cols = self._assign(t, cands, pv, allowed, chosen)
+            targets = [cands[j] if j >= 0 else held for j, held in zip(cols, targets)]
+            primary.update({cands[j].id: c for c, j in enumerate(first) if j >= 0})
+            self.held = [None if not f or tr is not None else "unframeable" for tr, f in zip(targets, assignable)]
             self._check(cols, allowed)
         for c, (cam, tr) in enumerate(zip(self.cameras, targets)):
             new = None if tr is None else tr.id
@@ -180,17 +194,21 @@ class CameraAssigner:
                 cam.target_frames += 1
             elif self.held[c] is not None:
                 cam.held[self.held[c]] += 1
-        self._handoffs(previous, [cam.track for cam in self.cameras])
+        for track, c in primary.items():  # the person's PTZ in charge changed: a hand-off
+            before = previous.get(track)
+            if before is not None and before != c:
+                self.cameras[before].handed_over += 1
+                self.cameras[c].handoffs += 1
+        self.primary = primary
         return targets
 
     # -- the parts -----------------------------------------------------------------------------
 
-    def _dwell(self, t: float, tracks: list[Track], settled: list[bool]) -> None:
+    def _dwell(self, t: float, live: dict[int, Track], settled: list[bool]) -> None:
         """Each PTZ on its person: settling starts the dwell, the person counts as framed from then, and
         ``dwell_s`` after settling their face is captured."""
-        by_id = {tr.id: tr for tr in tracks}
-        for cam, ok in zip(self.cameras, settled):
-            tr = by_id.get(cam.track)
+        for c, (cam, ok) in enumerate(zip(self.cameras, settled)):
+            tr = live.get(cam.track)
             if tr is None or not ok:
                 continue
             if cam.settled_at is None:
@@ -198,49 +216,54 @@ class CameraAssigner:
             tr.extra["last_framed"] = t
             if t - cam.settled_at >= self.dwell_s and not tr.captured:
                 tr.captured = True
-                tr.extra["captured_by"] = self.cameras.index(cam)
+                tr.extra["captured_by"] = c
                 self.captures += 1
 
     def _locked(self, cam: CameraState, t: float) -> bool:
         return cam.track is not None and (cam.settled_at is None or t - cam.settled_at < self.dwell_s)
 
     def values(self, t: float, cands: list[Track], pv: PairValues) -> np.ndarray:
-        """The values (K, n) of the module docstring, hysteresis included."""
+        """The values (K, n) of the module docstring, with the hysteresis of the PTZ in charge of each person."""
         need = np.array([1.0 + max(t - tr.extra.get("last_framed", t), 0.0) / self.tau for tr in cands])
-        return self._reach(cands, pv) * need[None, :]
+        return self._reach(pv, self._in_charge(cands)) * need[None, :]
 
-    def _reach(self, cands: list[Track], pv: PairValues) -> np.ndarray:
-        """(K, n): the framing strength, times the slew factor and the hysteresis bonus."""
+    def _reach(self, pv: PairValues, stay: np.ndarray) -> np.ndarray:
+        """(K, n): the framing strength, times the slew factor and the hysteresis bonus where ``stay``."""
         slew = self.tau / (self.tau + np.maximum(pv.slew_s, 0.0))
-        return pv.strength(self.face_target_px) * slew * (1.0 + self.hysteresis * self._on(cands))
+        return pv.strength(self.face_target_px) * slew * (1.0 + self.hysteresis * stay)
 
     def _on(self, cands: list[Track]) -> np.ndarray:
         """(K, n): 1 where the PTZ is on that track already."""
         ids = np.array([tr.id for tr in cands])
         return np.array([ids == cam.track for cam in self.cameras], float)
 
+    def _in_charge(self, cands: list[Track]) -> np.ndarray:
+        """(K, n): 1 where the PTZ was the one in charge of that person (the first round's)."""
+        return np.array([[self.primary.get(tr.id) == c for tr in cands] for c in range(self.n_cameras)], float)
+
     def _assign(self, t: float, cands: list[Track], pv: PairValues, allowed: np.ndarray,
-                chosen: Track | None) -> np.ndarray:
-        """Each PTZ's candidate index (-1: none): the lexicographic assignment of the module docstring
-        (the most people first: :func:`assign_exact`), then the rounds of the spare PTZs."""
+                chosen: Track | None) -> tuple[np.ndarray, np.ndarray]:
+        """Each PTZ's candidate index (-1: none) in the first round (the PTZs in charge: the lexicographic
+        assignment of the module docstring, the most people first, :func:`assign_exact`) and after the
+        rounds of the spare PTZs."""
         K, n = allowed.shape
         total = self.values(t, cands, pv)
-        lock = np.array([self._locked(cam, t) for cam in self.cameras])[:, None] & (self._on(cands) > 0)
+        lock = np.array([self._locked(cam, t) for cam in self.cameras])[:, None] & (self._in_charge(cands) > 0)
         priority = np.array([self._first(tr) for tr in cands])
         manual = np.array([tr is chosen for tr in cands])
         for tier in (lock, np.broadcast_to(priority, (K, n)), np.broadcast_to(manual, (K, n))):
             total = total + (K * max(float(total.max()), 0.0) + 1.0) * tier  # outweighs any K pairs below it
-        cols = assign_exact(total, allowed, self.capacity)
-        strength, reach = pv.strength(self.face_target_px), self._reach(cands, pv)
+        first = cols = assign_exact(total, allowed, self.capacity)
+        strength, reach = pv.strength(self.face_target_px), self._reach(pv, self._on(cands))
         while True:  # spare PTZs, one round at a time: where they add the most expected capture
             left = cols < 0
             can = allowed & left[:, None]
             if not can.any():
-                return cols
+                return first, cols
             extra = assign_exact(np.maximum(miss_probability(strength, cols), 1e-6)[None, :] * reach, can,
                                  self.capacity)
             if (extra < 0).all():
-                return cols
+                return first, cols
             cols = np.where(left & (extra >= 0), extra, cols)
 
     def _first(self, track: Track) -> bool:
@@ -254,16 +277,6 @@ class CameraAssigner:
             if len(on) > 1 and any(allowed[c, k] for c in on for k in range(allowed.shape[1]) if k not in taken):
                 self.doubled_while_waiting += 1
                 return
-
-    def _handoffs(self, before: list[int | None], after: list[int | None]) -> None:
-        for c, j in enumerate(before):
-            if j is None or after[c] == j:
-                continue
-            keepers = [d for d, k in enumerate(after) if k == j and d != c]
-            if keepers:
-                took = [d for d in keepers if before[d] != j]
-                self.cameras[c].handed_over += 1
-                self.cameras[(took or keepers)[0]].handoffs += 1
 
     def summary(self) -> list[dict]:
         """Per PTZ: ``id`` (the rig's order), ``target_frames``, ``handoffs``, ``handed_over``, ``held``."""

@@ -71,7 +71,8 @@ __all__ = ["STAGES", "Command", "RealTimeLoop", "Samples", "Timings", "perceive"
 
 @dataclass
 class Command:
-    """What was (or would have been) sent for a frame (``track`` ``None``: the operator's manual pointing)."""
+    """What was (or would have been) sent for a frame (``track`` ``None``: the operator's manual pointing;
+    ``xy``: the track's filtered floor position (m) when the command was made)."""
 
     track: int | None
     pan: float
@@ -84,6 +85,7 @@ class Command:
     t_predicted: float
     aimed: Aim | None = None
     floor_sd: np.ndarray | None = None  # sd of the predicted floor position (X, Y), m
+    xy: np.ndarray | None = None
 
 
 class Samples:
@@ -179,8 +181,9 @@ class RealTimeLoop:
                        "no_target": 0, "held_untrusted": 0, "held_unframeable": 0, "held_paused": 0,
                        "operator_frames": 0,
                        "invalid_geometry": 0, "deadline_overruns": 0, "tracks_over_slots": 0}
-        #: per PTZ, frames on which it had a target
+        #: per PTZ, frames on which it had a target, and its latest command
         self.target_frames = [0] * len(links)
+        self._last: list[Command | None] = [None] * len(links)
         self._stop = threading.Event()
         self._old_handlers: dict = {}
         self.t_start = time.monotonic()
@@ -413,12 +416,12 @@ class RealTimeLoop:
                 self.counts[f"held_{self.selector.held}"] += 1
             return None
         j, aimed = aims[target.id]
-        return self._command(frame, c, 0, j, target.id, aimed)
+        return self._command(frame, c, 0, j, target, aimed)
 
-    def _command(self, frame: Frame, c, k: int, j: int, track: int, aimed: Aim) -> Command:
-        """PTZ ``k``'s command at track ``track`` (its aim ``aimed``, entry ``j`` of the control call's), sent
+    def _command(self, frame: Frame, c, k: int, j: int, target, aimed: Aim) -> Command:
+        """PTZ ``k``'s command at track ``target`` (its aim ``aimed``, entry ``j`` of the control call's), sent
         unless it is the track the PTZ was sent to last and within the dead zone."""
-        link = self.links[k]
+        link, track = self.links[k], target.id
         zooms = {rule: float(aimed.zooms[rule].zoom) for rule in ZOOM_RULES}
         pan, tilt, zoom = float(aimed.pointing.pan), float(aimed.pointing.tilt), zooms[self.cfg.zoom_rule]
         cov = aimed.covariance.cov
@@ -429,7 +432,7 @@ class RealTimeLoop:
             self.counts["dead_zone"] += 1
         return Command(track=track, pan=pan, tilt=tilt, zoom=zoom, zooms=zooms, sd_pan=sd_pan,
                        sd_tilt=sd_tilt, sent=send, t_predicted=frame.stamp + float(c.lead[k, j]), aimed=aimed,
-                       floor_sd=c.floor_sd[k, j])
+                       floor_sd=c.floor_sd[k, j], xy=np.array(target.position, float))
 
     def _assign(self, frame: Frame, tracks, c, aim_of: dict[int, int], op: OperatorState | None,
                 pointing: tuple[float, float, float] | None) -> tuple[list[Command | None], str | None]:
@@ -453,16 +456,21 @@ class RealTimeLoop:
         targets = self.assigner.choose(frame.stamp, tracks, [link.settled(frame.stamp) for link in self.links],
                                        pairs, manual=op.target if op is not None else None,
                                        paused=op is not None and op.paused,
-                                       free=[k != manual_k for k in range(K)])
+                                       free=[k != manual_k for k in range(K)], alive=self.tracker.tracks)
         commands: list[Command | None] = []
         for k, target in enumerate(targets):
+            last = self._last[k]
             if k == manual_k:
                 commands.append(self._manual(frame, pointing, self.links[k]))
             elif target is None:
                 commands.append(None)
+            elif self.assigner.holding[k]:  # its person's detection missed this frame: the PTZ stays
+                commands.append(dataclasses.replace(last, sent=False) if last is not None and last.track == target.id
+                                else None)
             else:
                 j = aim_of[target.id]
-                commands.append(self._command(frame, c, k, j, target.id, _entry(c.aims, k, j)))
+                commands.append(self._command(frame, c, k, j, target, _entry(c.aims, k, j)))
+        self._last = commands
         held = next((h for h in self.assigner.held if h is not None), None)
         if all(command is None for command in commands):
             self.counts["no_target"] += 1

@@ -15,7 +15,8 @@ Per processed frame (an ``on_frame`` hook of :class:`~runtime.loop.RealTimeLoop`
   person's true head at the time the command was predicted for (interpolated between frames), in
   the world's *true* rig of that PTZ (:func:`omnijax._foveal.head_in_view`: the whole head sphere
   inside the frame). The target is the true person nearest the target track (within ``gate_m``;
-  otherwise the trial fails).
+  otherwise the trial fails; the track's position is the one the command was made at: a PTZ holding on
+  through a missed detection keeps its command).
   ``face_px``: the head's width in the foveal image at that zoom and the true distance. Each
   rule also reports the mean containment probability it predicted, and the rate over the
   trials where it could reach p_contain at all (its widest zoom sufficed).
@@ -130,7 +131,8 @@ class DemoScorer:
         return out
 
     def _add_trial(self, index: int, camera: int, command, tracks) -> int | None:
-        xy = next((tr.position for tr in tracks if tr.id == command.track), None)
+        xy = command.xy if command.xy is not None else next((tr.position for tr in tracks if tr.id == command.track),
+                                                             None)
         pos_now = self.positions[min(index, len(self.positions) - 1)]
         person = None
         if xy is not None:
