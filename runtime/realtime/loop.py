@@ -464,9 +464,9 @@ class RealTimeLoop:
                 commands.append(self._manual(frame, pointing, self.links[k]))
             elif target is None:
                 commands.append(None)
-            elif self.assigner.holding[k]:  # its person's detection missed this frame: the PTZ stays
-                commands.append(dataclasses.replace(last, sent=False) if last is not None and last.track == target.id
-                                else None)
+            elif self.assigner.holding[k]:  # its person's detection missed this frame: the PTZ stays where it is
+                commands.append(dataclasses.replace(last, sent=False, t_predicted=frame.stamp)
+                                if last is not None and last.track == target.id else None)
             else:
                 j = aim_of[target.id]
                 commands.append(self._command(frame, c, k, j, target, _entry(c.aims, k, j)))
