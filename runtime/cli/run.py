@@ -39,7 +39,7 @@ assigned to the PTZs exactly (face size and containment probability per PTZ
 and person, slew time, how long each person has gone uncaptured; hysteresis;
 hand-offs; a spare PTZ gives the weakest-framed person a second view:
 docs/site.md).
-Ctrl-C or SIGTERM: the PTZ goes home, the summary is written, nothing is lost.
+Ctrl-C or SIGTERM: the PTZs go home, the summary is written, nothing is lost.
 
 Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line per frame),
 DIR/events.jsonl (person appeared, face captured, left; faces in DIR/faces/ with
