@@ -61,6 +61,7 @@ def main() -> None:
     from runtime.files import load_scenario
     from runtime.realtime.config import LoopConfig
     from runtime.realtime.loop import RealTimeLoop
+    from runtime.realtime.ptz_link import PtzLink
     from runtime.realtime.sources import Frame
 
     rig, sc = load_scenario(args.scenario)
@@ -78,8 +79,9 @@ def main() -> None:
         source, counts = _Source(), {"dropped": 0, "stale": 0, "broken": 0, "wrong_size": 0}
 
     with tempfile.TemporaryDirectory(prefix="bench-control-") as tmp:
-        loop = RealTimeLoop(rig, build_detector(rig), bg, _Capture(), None, load_ptz_profile(None, "visca"),
-                            LoopConfig(quiet=True), Path(tmp) / "log.jsonl")
+        links = [PtzLink(0, None, load_ptz_profile(None, "visca"))]
+        loop = RealTimeLoop(rig, build_detector(rig), bg, _Capture(), links, LoopConfig(quiet=True),
+                            Path(tmp) / "log.jsonl")
         loop.warm_up()
         loop.off_path = _Discard()
         times, cpu = [], []
@@ -88,7 +90,7 @@ def main() -> None:
             now, c0 = time.monotonic(), time.process_time()
             frame = Frame(index=n_bg + k, t=now, stamp=(n_bg + k) * period, image=image)
             loop._process(frame)
-            jax.block_until_ready(loop.lines)  # the background update belongs to the frame's cost
+            jax.block_until_ready(loop.keeper.lines)  # the background update belongs to the frame's cost
             times.append(time.monotonic() - now)
             cpu.append(time.process_time() - c0)
         wall = time.monotonic() - t_start

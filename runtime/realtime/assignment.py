@@ -62,9 +62,10 @@ _solve = jax.jit(kalman.optimal_assignment)
 
 def assign_exact(value: np.ndarray, allowed: np.ndarray, columns: int | None = None) -> np.ndarray:
     """The assignment of rows to columns of largest total ``value`` (R, C) among the ``allowed`` pairs
-    (each row at most one column, each column at most one row; as many pairs as can be first, since
-    every value is made positive): each row's column, -1 for none. Solved exactly by the tracker's
-    Hungarian assignment, on a cost matrix padded to ``columns`` (one compiled shape)."""
+    (each row at most one column, each column at most one row), with as many pairs as can be first:
+    each row's column, -1 for none. Solved exactly by the tracker's Hungarian assignment on a cost
+    matrix padded to ``columns`` (one compiled shape), where a row left without an allowed column sits
+    on a :data:`~runtime.realtime.kalman.FORBIDDEN` one, which costs more than any sum of the others."""
     R, C = value.shape
     width = max(columns or C, C, R)
     if R == 0 or C == 0 or not allowed.any():
@@ -84,7 +85,6 @@ class CameraState:
 
     track: int | None = None
     settled_at: float | None = None
-    target_frames: int = 0
     handoffs: int = 0
     handed_over: int = 0
     held: dict[str, int] = field(default_factory=lambda: {"untrusted": 0, "unframeable": 0, "paused": 0})
@@ -190,9 +190,7 @@ class CameraAssigner:
             new = None if tr is None else tr.id
             if new != cam.track:
                 cam.track, cam.settled_at = new, None
-            if tr is not None:
-                cam.target_frames += 1
-            elif self.held[c] is not None:
+            if tr is None and self.held[c] is not None:
                 cam.held[self.held[c]] += 1
         for track, c in primary.items():  # the person's PTZ in charge changed: a hand-off
             before = previous.get(track)
@@ -279,9 +277,10 @@ class CameraAssigner:
                 return
 
     def summary(self) -> list[dict]:
-        """Per PTZ: ``id`` (the rig's order), ``target_frames``, ``handoffs``, ``handed_over``, ``held``."""
-        return [{"id": c, "target_frames": cam.target_frames, "handoffs": cam.handoffs,
-                 "handed_over": cam.handed_over, "held": dict(cam.held)} for c, cam in enumerate(self.cameras)]
+        """Per PTZ: ``id`` (the rig's order), ``handoffs``, ``handed_over``, ``held`` (frames without a target,
+        by reason)."""
+        return [{"id": c, "handoffs": cam.handoffs, "handed_over": cam.handed_over, "held": dict(cam.held)}
+                for c, cam in enumerate(self.cameras)]
 
 
 def miss_probability(strength: np.ndarray, cols: np.ndarray) -> np.ndarray:
