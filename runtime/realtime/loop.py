@@ -298,6 +298,8 @@ class RealTimeLoop:
             swap = self.operator.take_zones()
             if swap is not None:  # rebuilt off this thread; same shapes, nothing recompiles
                 self.detector, self.selector.priority = swap.detector, swap.priority
+                if self.assigner is not None:
+                    self.assigner.priority = swap.priority
                 self.keeper.detector = swap.detector
                 self.zones, self.zones_version = swap.zones, swap.version
             op = self.operator.state
