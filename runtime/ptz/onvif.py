@@ -647,7 +647,7 @@ class OnvifDriver:
     def _rate(self, axis: str) -> float:
         z = self.profile.zoom
         return ((z.position[-1] - z.position[0]) / z.seconds_full_range if axis == "zoom"
-                else self.profile.slew_units_s(axis))
+                else self.profile.move_units_s(axis))
 
     def _limits(self, axis: str) -> tuple[float, float]:
         if axis == "zoom":

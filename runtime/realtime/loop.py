@@ -179,10 +179,8 @@ class RealTimeLoop:
         W, H = rig.omni.image_size
         self.shape = (H, W, 3)
         self.period = 1.0 / capture.source.fps if capture.source.fps else None
-        if profile is not None:
-            self._rates = (float(profile.pan.slew_deg_s()), float(profile.tilt.slew_deg_s()))
-        else:
-            self._rates = (1.0, 1.0)
+        #: the slew rates of the moves the driver commands (the speed code it sends), deg/s
+        self._rates = profile.move_rates_deg_s() if profile is not None else (1.0, 1.0)
 
     # -- control --------------------------------------------------------------------------
 
