@@ -6,8 +6,9 @@ Use::
         ptz.set_target(pan, tilt, zoom)      # every frame; returns at once
         print(ptz.counters)                  # {"commands", "errors", "reconnects"}
 
-The same interface and rules as :class:`runtime.ptz.driver.PtzDriver` (latest target wins,
-nothing queues up, one worker owns the link, reconnect with exponential back-off, counters),
+The same interface and rules as :class:`runtime.ptz.driver.PtzDriver`, from the same base
+(:class:`runtime.ptz.base.DriverBase`: latest target wins, nothing queues up, one worker owns
+the link, reconnect with exponential back-off, counters),
 over the ONVIF client library ``onvif-zeep-async`` (docs/ptz.md says why that one). The
 worker runs its own asyncio loop in a thread; ``set_target`` only stores the target.
 
@@ -44,17 +45,14 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-import threading
 import time
-from collections import deque
 from concurrent.futures import Future
 from dataclasses import dataclass
 from urllib.parse import unquote, urlsplit
 
-import numpy as np
-
-from .driver import PtzError, PtzPortError
-from .profile import DeviceProfile, DeviceTarget, PtzPosition
+from .base import DriverBase
+from .errors import PtzError, PtzPortError
+from .profile import DeviceProfile, DeviceTarget
 
 log = logging.getLogger("omnijax.ptz")
 
@@ -67,7 +65,6 @@ _CONTINUOUS_TAU_S = 0.15
 _CONTINUOUS_TIMEOUT_S = 1.0
 #: A move's status is polled at this interval (s) at most (``link.retry_delay_s`` when larger).
 _IDLE_S = 0.1
-_LATENCIES_KEPT = 10_000
 _AXES = ("pan", "tilt", "zoom")
 
 
@@ -132,37 +129,23 @@ class _EgressClock:
         return envelope, http_headers
 
 
-class OnvifDriver:
-    """Steers one ONVIF PTZ camera; see the module docstring. Thread-safe; ``set_target`` never blocks."""
+class OnvifDriver(DriverBase):
+    """Steers one ONVIF PTZ camera; see the module docstring and :class:`DriverBase`."""
+
+    COUNTERS = ("moves", "status_polls", "faults", "timeouts", "malformed", "unauthorised", "corrections",
+                "timer_fallbacks")
+    LATENCIES = ("move", "query")
+    WORKER = "ptz-onvif"
 
     def __init__(self, port: str, profile: DeviceProfile) -> None:
+        super().__init__(redact(port), profile)  # what messages show: never the password
         self._raw_url = port
-        self.port = redact(port)  # what messages show: never the password
-        self.profile = profile
-        self._link = profile.link
         self._url: OnvifUrl | None = None
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._connected = threading.Event()
-        self._worker: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._wake: asyncio.Event | None = None
-        self._target: DeviceTarget | None = None
-        self._seq = 0
-        self._sent_seq = 0
-        self._queries: deque[Future] = deque()
-        self._clamped: tuple[str, ...] = ()
-        self._ever_connected = False
-        self._outage_since: float | None = None
+        self._wakeup: asyncio.Event | None = None
         self._unauthorised = False
-        self.last_error: str | None = None
         #: what discovery found: profile token, move modes, whether position and move status are reported
         self.discovered: dict = {}
-        self._counts = dict.fromkeys(
-            ("commands", "errors", "reconnects", "moves", "status_polls", "faults", "timeouts", "malformed",
-             "unauthorised", "clamped", "superseded", "corrections", "timer_fallbacks"), 0)
-        self._latency = {"move": deque(maxlen=_LATENCIES_KEPT), "query": deque(maxlen=_LATENCIES_KEPT)}
-        self._writes: deque[tuple[int, float]] = deque(maxlen=_LATENCIES_KEPT)
         # motion book-keeping (worker only): the goal in device units, the estimate, the move's deadline
         self._goal: tuple[float, float, float] | None = None
         self._estimate: list[float] = [0.0, 0.0, float(profile.zoom.position[0])]
@@ -177,92 +160,31 @@ class OnvifDriver:
         self._egress = _EgressClock()
 
     # ------------------------------------------------------------------------------------
-    # Public API (as PtzDriver's)
+    # What DriverBase asks of a driver
     # ------------------------------------------------------------------------------------
 
-    def connect(self, timeout: float | None = 5.0) -> OnvifDriver:
-        """Start the worker; wait up to ``timeout`` s for the camera (``None``: do not wait).
-
-        :class:`PtzPortError` for a malformed URL or refused credentials, :class:`PtzError` if no
-        camera was discovered in time (the driver is then stopped again).
-        """
-        if self._worker is not None:
-            return self
+    def _check(self) -> None:
         self._url = OnvifUrl.parse(self._raw_url)
-        self._stop.clear()
-        self._worker = threading.Thread(target=self._thread_main, name="ptz-onvif", daemon=True)
-        self._worker.start()
-        if timeout is not None and not self._wait_connected(timeout):
-            reason = self.last_error or "no answer"
-            unauthorised = self._unauthorised
-            self.disconnect()
-            if unauthorised:
-                raise PtzPortError(f"{self.port}: the camera refused the user name or password ({reason})")
-            raise PtzError(f"{self.port}: no ONVIF PTZ camera within {timeout:g} s ({reason})")
-        return self
 
-    def _wait_connected(self, timeout: float) -> bool:
-        """Wait for the first connection; give up early when the camera refused the credentials."""
-        deadline = time.monotonic() + timeout
-        while not self._connected.wait(min(0.05, max(0.0, deadline - time.monotonic()))):
-            if self._unauthorised or time.monotonic() >= deadline:
-                return False
-        return True
+    def _hopeless(self) -> bool:
+        return self._unauthorised
 
-    def disconnect(self) -> None:
-        """Stop the worker and close the session; pending queries fail with :class:`PtzError`."""
-        self._stop.set()
-        self._poke()
-        if self._worker is not None:
-            self._worker.join()
-            self._worker = None
+    def _connect_error(self, timeout: float) -> PtzError:
+        reason = self.last_error or "no answer"
+        if self._unauthorised:
+            return PtzPortError(f"{self.port}: the camera refused the user name or password ({reason})")
+        return PtzError(f"{self.port}: no ONVIF PTZ camera within {timeout:g} s ({reason})")
 
-    def __enter__(self) -> OnvifDriver:
-        return self.connect()
+    def _wake(self) -> None:
+        loop, wakeup = self._loop, self._wakeup
+        if loop is not None and wakeup is not None:
+            try:
+                loop.call_soon_threadsafe(wakeup.set)
+            except RuntimeError:  # the loop has just closed
+                pass
 
-    def __exit__(self, *exc) -> None:
-        self.disconnect()
-
-    @property
-    def connected(self) -> bool:
-        return self._connected.is_set()
-
-    def set_target(self, pan: float, tilt: float, zoom: float) -> DeviceTarget:
-        """Aim at omnijax ``pan``, ``tilt`` (rad) with zoom factor ``zoom``; returns at once (see PtzDriver)."""
-        t = self.profile.to_device(pan, tilt, zoom)
-        if t.clamped != self._clamped:
-            if t.clamped:
-                log.warning("PTZ target clamped to the device's limits on %s (pan %.2f deg, tilt %.2f deg, "
-                            "zoom %.2fx requested)", ", ".join(t.clamped), np.degrees(pan), np.degrees(tilt), zoom)
-            else:
-                log.info("PTZ target back within the device's limits")
-            self._clamped = t.clamped
-        with self._lock:
-            if t.clamped:
-                self._counts["clamped"] += 1
-            if self._target is not None and self._sent_seq < self._seq:
-                self._counts["superseded"] += 1
-            self._target = t
-            self._seq += 1
-        self._poke()
-        return t
-
-    @property
-    def target(self) -> DeviceTarget | None:
-        return self._target
-
-    @property
-    def sequence(self) -> int:
-        with self._lock:
-            return self._seq
-
-    def take_writes(self) -> list[tuple[int, float]]:
-        """(sequence number, ``time.monotonic()``) of each move request handed to the HTTP transport since
-        the last call (for frame-to-wire latency)."""
-        with self._lock:
-            out = list(self._writes)
-            self._writes.clear()
-        return out
+    def _extra_stats(self) -> dict:
+        return {"onvif": dict(self.discovered), "moving": self._moving}
 
     def capabilities(self):
         """What this camera offers (a :class:`runtime.ptz.transports.Capabilities`), as discovered at the last
@@ -270,7 +192,7 @@ class OnvifDriver:
         from .transports import Capabilities
 
         p = self.profile
-        with self._lock:
+        with self._cond:
             d = dict(self.discovered)
             fallbacks = self._counts["timer_fallbacks"]
         notes = []
@@ -288,78 +210,11 @@ class OnvifDriver:
             zoom=(float(p.zoom.magnification[0]), float(p.zoom.magnification[-1])),
             limits_deg={"pan": tuple(p.pan.limits_deg), "tilt": tuple(p.tilt.limits_deg)}, notes=tuple(notes))
 
-    def request_position(self) -> Future:
-        """Ask the camera where it is (GetStatus; the driver's estimate where the camera reports no position)."""
-        fut: Future = Future()
-        with self._lock:
-            if not self.connected:
-                fut.set_exception(PtzError(f"{self.port}: not connected"))
-                return fut
-            self._queries.append(fut)
-        self._poke()
-        return fut
-
-    def query_position(self, timeout: float = 2.0) -> PtzPosition:
-        return self.request_position().result(timeout)
-
-    def reached(self, tolerance: int = 1) -> bool:
-        """Whether the camera reports the latest target, within ``tolerance`` device units per axis."""
-        t = self._target
-        if t is None:
-            return True
-        try:
-            pos = self.query_position()
-        except (PtzError, TimeoutError):
-            return False
-        return all(self.profile.units_apart(axis, a, b) <= tolerance
-                   for axis, a, b in zip(_AXES, pos.units, (t.pan, t.tilt, t.zoom)))
-
-    def wait_reached(self, timeout: float, tolerance: int = 1, poll_s: float = 0.05) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.connected and self.reached(tolerance):
-                return True
-            time.sleep(poll_s)
-        return False
-
-    @property
-    def counters(self) -> dict[str, int]:
-        """``commands`` (SOAP requests sent), ``errors`` (faults, time-outs, malformed replies, outages),
-        ``reconnects``."""
-        with self._lock:
-            return {k: self._counts[k] for k in ("commands", "errors", "reconnects")}
-
-    def stats(self) -> dict:
-        """All counters, what discovery found, and request-to-reply latencies (ms) of moves and queries."""
-        with self._lock:
-            out: dict = dict(self._counts)
-            lat = {k: 1e3 * np.asarray(v) for k, v in self._latency.items()}
-            out["onvif"] = dict(self.discovered)
-        out["connected"] = self.connected
-        out["moving"] = self._moving
-        out["latency_ms"] = {
-            k: ({"p50": float(np.median(v)), "p99": float(np.percentile(v, 99)), "n": int(v.size)} if v.size
-                else {"n": 0}) for k, v in lat.items()}
-        return out
-
     # ------------------------------------------------------------------------------------
     # Worker
     # ------------------------------------------------------------------------------------
 
-    def _poke(self) -> None:
-        loop, wake = self._loop, self._wake
-        if loop is not None and wake is not None:
-            try:
-                loop.call_soon_threadsafe(wake.set)
-            except RuntimeError:  # the loop has just closed
-                pass
-
-    def _count(self, *names: str) -> None:
-        with self._lock:
-            for n in names:
-                self._counts[n] += 1
-
-    def _thread_main(self) -> None:
+    def _run(self) -> None:
         try:
             asyncio.run(self._main())
         except Exception as exc:  # the worker never dies silently: say why, fail the queries
@@ -371,7 +226,7 @@ class OnvifDriver:
 
     async def _main(self) -> None:
         self._loop = asyncio.get_running_loop()
-        self._wake = asyncio.Event()
+        self._wakeup = asyncio.Event()
         backoff = self._link.reconnect_backoff_s[0]
         while not self._stop.is_set():
             cam = None
@@ -394,27 +249,14 @@ class OnvifDriver:
                 backoff = min(2 * backoff, self._link.reconnect_backoff_s[1])
 
     def _fail(self, reason: str, unauthorised: bool) -> None:
-        self.last_error = reason
         self._unauthorised = unauthorised or (self._unauthorised and not self._ever_connected)
         if unauthorised:
             self._count("unauthorised")
-        first = self._outage_since is None
-        if first:
-            self._outage_since = time.monotonic()
-            self._count("errors")
-        (log.warning if first else log.debug)("PTZ link lost on %s: %s; reconnecting", self.port, reason)
-        self._fail_queries(f"{self.port}: {reason}")
-
-    def _fail_queries(self, reason: str) -> None:
-        with self._lock:
-            queries, self._queries = list(self._queries), deque()
-        for fut in queries:
-            if not fut.done():
-                fut.set_exception(PtzError(reason))
+        self._link_lost(reason)
 
     async def _sleep(self, seconds: float) -> None:
         """Sleep up to ``seconds``, waking early for a new target, a query or a stop."""
-        wake = self._wake
+        wake = self._wakeup
         wake.clear()
         try:
             await asyncio.wait_for(wake.wait(), max(0.0, seconds))
@@ -469,7 +311,7 @@ class OnvifDriver:
         else:
             self._silent = 0
             if kind:
-                with self._lock:
+                with self._cond:
                     self._latency[kind].append(time.perf_counter() - t0)
             return True if reply is None else reply  # an empty response (AbsoluteMoveResponse) is a success
         self._silent += 1
@@ -495,18 +337,13 @@ class OnvifDriver:
         except BaseException:
             await self._close(cam)
             raise
-        with self._lock:
-            if self._ever_connected:
-                self._counts["reconnects"] += 1
-            self._ever_connected = True
+        with self._cond:
             self._sent_seq = 0  # the latest target is sent again
         self._unauthorised = False
-        self._connected.set()
-        outage, self._outage_since = self._outage_since, None
+        after = self._link_up()
         d = self.discovered
         log.info("PTZ connected on %s (ONVIF, profile %s, %s moves, status: %s)%s", self.port,
-                 d["profile_token"], d["mode"], d["move_status"],
-                 "" if outage is None else f" after {time.monotonic() - outage:.2f} s without")
+                 d["profile_token"], d["mode"], d["move_status"], after)
         return cam
 
     async def _discover(self, cam) -> None:
@@ -558,7 +395,7 @@ class OnvifDriver:
         status = await self._call(ptz, "GetStatus", {"ProfileToken": chosen.token}, fatal=True)
         pos = self._position_of(status)
         move_status = getattr(getattr(status, "MoveStatus", None), "PanTilt", None)
-        with self._lock:
+        with self._cond:
             self.discovered = {
                 "host": self._url.host, "port": self._url.port, "profile_token": chosen.token,
                 "configuration_token": config_token, "modes": modes, "zoom_modes": zoom_modes, "mode": modes[0],
@@ -600,17 +437,17 @@ class OnvifDriver:
         poll = max(self._link.retry_delay_s, 0.01)
         next_send = 0.0
         while not self._stop.is_set():
-            with self._lock:
+            with self._cond:
                 query = self._queries.popleft() if self._queries else None
             if query is not None:
                 await self._answer_query(query)
                 continue
             now = time.monotonic()
-            with self._lock:
+            with self._cond:
                 target, seq = self._target, self._seq
                 fresh = target is not None and self._sent_seq < seq
             if fresh and now >= next_send:
-                with self._lock:
+                with self._cond:
                     self._sent_seq = seq
                 await self._move(target, seq)
                 next_send = time.monotonic() + self._link.min_interval_s
@@ -693,10 +530,10 @@ class OnvifDriver:
         reply = await self._call(self._ptz, op, params, kind="move")
         if reply is None:
             if self._silent:  # unanswered or garbled (counted): it may not have moved, send the latest again
-                with self._lock:
+                with self._cond:
                     self._sent_seq = 0
             return  # a fault (counted): sent again when the target changes
-        with self._lock:
+        with self._cond:
             self._writes.append((seq, self._egress.at))
         self._set_estimate(here, now)
         self._eta = now + self._travel_s(here, goal) + self._link.retry_delay_s
@@ -724,7 +561,7 @@ class OnvifDriver:
         self._count("moves")
         reply = await self._call(self._ptz, "ContinuousMove", params, kind="move")
         if reply is not None:
-            with self._lock:
+            with self._cond:
                 self._writes.append((self._seq, self._egress.at))
             self._velocity = tuple(vi * self._rate(a) for vi, a in zip(v, _AXES))
             self._moving = True
@@ -752,7 +589,7 @@ class OnvifDriver:
             if mode == "relative" and pos is not None and self._goal is not None and \
                     max(abs(g - p) for g, p in zip(self._goal, pos)) > 1:
                 self._count("corrections")
-                with self._lock:
+                with self._cond:
                     self._sent_seq = 0  # send the latest target again, as a translation from where it is
         elif reported is None and now >= self._eta:
             self._count("timer_fallbacks")
