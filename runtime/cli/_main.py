@@ -1,7 +1,8 @@
 """The ``omnijax`` command line: one subcommand per job, each a module of ``runtime/cli/``.
 
 Exit codes: 0 success, 2 bad input (one line on stderr naming what was wrong and
-what was expected), 130 interrupted (Ctrl-C or SIGTERM, at any moment; one line).
+what was expected), 130 interrupted (Ctrl-C or SIGTERM; one line), 141 the reader of
+stdout went away (quietly).
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ Rig files are TOML (see configs/paper.toml for every key, with units).
 
 Exit codes: 0 done; 2 bad input (a config, file, flag or port), with one line on
 stderr naming what was wrong, found before any work and leaving nothing behind;
-130 interrupted (Ctrl-C or SIGTERM, at any moment; nothing half-written).
+130 interrupted (Ctrl-C or SIGTERM, at any moment; nothing half-written);
+141 the reader of stdout went away (omnijax ... | head -1: ends quietly).
 """
 
 
@@ -102,14 +104,26 @@ def main(argv: list[str] | None = None) -> int:
             return 130
 
 
+#: Exit code when the reader of stdout went away (a closed pipe): 128 + SIGPIPE, as the shell reports it.
+EXIT_PIPE = 141
+
+
 def console() -> None:
     """The ``omnijax`` executable (and ``python -m runtime.cli``): :func:`main`, then exit with its code.
+
+    A reader that goes away (``omnijax variance ... --json | head -1``) ends the command quietly, with
+    :data:`EXIT_PIPE` and no traceback.
 
     After Ctrl-C or SIGTERM (exit code 130) the process ends at once, once :func:`main` has cleaned
     up (staged outputs removed, child processes stopped): JAX may still be compiling on its own
     threads, and the interpreter's normal shutdown underneath them can crash (SIGSEGV).
     """
-    code = main()
+    try:
+        code = main()
+        sys.stdout.flush()
+    except BrokenPipeError:  # the reader went away (omnijax ... | head -1): end quietly, as SIGPIPE would
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nothing left for the exit's flush
+        code = EXIT_PIPE
     if code == 130:
         sys.stdout.flush()
         sys.stderr.flush()
