@@ -8,9 +8,12 @@ stdout went away (quietly).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import logging
 import os
 import sys
+from collections.abc import Iterator
 
 from runtime.errors import Interrupted, UsageError, interrupt_handlers
 
@@ -58,6 +61,40 @@ def _is_input_error(exc: Exception) -> bool:
     return isinstance(exc, UsageError) or (config is not None and isinstance(exc, config.ConfigError))
 
 
+class _Lines(logging.Handler):
+    """Log records as one line like the command's other messages, ``omnijax run: warning: ...``, on stderr."""
+
+    def __init__(self, command: str) -> None:
+        super().__init__(logging.WARNING)
+        self.command = command
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            sys.stderr.write(f"{self.command}: {record.levelname.lower()}: {record.getMessage()}\n")
+        except Exception:
+            self.handleError(record)
+
+
+@contextlib.contextmanager
+def log_lines(command: str) -> Iterator[None]:
+    """Warnings of omnijax and of the libraries under it are printed as ``COMMAND: warning: ...`` while the
+    block runs: the root logger gets this handler (where nothing else configured it, i.e. not under a host
+    such as pytest), so that a library's own ``logging.basicConfig`` (onvif-zeep-async calls it on import)
+    adds no raw ``WARNING:name:`` handler."""
+    root = logging.getLogger()
+    if root.handlers:
+        yield
+        return
+    handler, level = _Lines(command), root.level
+    root.addHandler(handler)
+    root.setLevel(logging.WARNING)
+    try:
+        yield
+    finally:
+        root.removeHandler(handler)
+        root.setLevel(level)
+
+
 def enable_float64() -> None:
     """JAX in float64 from here on (see :func:`main`)."""
     if "jax" in sys.modules:
@@ -90,7 +127,8 @@ def main(argv: list[str] | None = None) -> int:
                 from runtime.output import check_output
 
                 check_output(args.out)
-            return int(args.func(args) or 0)
+            with log_lines(command):
+                return int(args.func(args) or 0)
         except Exception as exc:
             if not _is_input_error(exc):
                 raise

@@ -246,6 +246,10 @@ class DriverBase(abc.ABC):
     # For the worker
     # ------------------------------------------------------------------------------------
 
+    def _warn(self, message: str, *args) -> None:
+        """A warning once the camera has been connected; before that, debug (:meth:`connect`'s one line says why)."""
+        (log.warning if self._ever_connected else log.debug)(message, *args)
+
     def _count(self, *names: str) -> None:
         with self._cond:
             for n in names:
@@ -266,8 +270,7 @@ class DriverBase(abc.ABC):
         if first:
             self._outage_since = time.monotonic()
             self._count("errors")
-        (log.warning if first and self._ever_connected else log.debug)(
-            "PTZ link lost on %s: %s; reconnecting", self.port, reason)
+        (self._warn if first else log.debug)("PTZ link lost on %s: %s; reconnecting", self.port, reason)
         self._fail_queries(f"{self.port}: {reason}")
 
     def _link_up(self) -> str:

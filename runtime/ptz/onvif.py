@@ -76,6 +76,60 @@ class _Unauthorised(_LinkLost):
     """Internal: the camera refused the credentials."""
 
 
+class _NotOnvif(_LinkLost):
+    """Internal: what answered discovery is no ONVIF PTZ camera (no SOAP reply, no PTZ service)."""
+
+
+class _BadReply(Exception):
+    """Internal: what came back is no SOAP reply (the message says what it was)."""
+
+
+#: Longest reply read (bytes): ONVIF replies are a few kB; the rest of a longer one is not read.
+MAX_REPLY_BYTES = 1 << 20
+
+
+def describe_reply(status: int, content_type: str, body: bytes) -> str | None:
+    """Why an HTTP reply (``status``, its ``Content-Type``, its ``body``) is no SOAP reply, in a few words
+    naming what came back (``None``: it may be one: XML, and a SOAP envelope where the status is an error)."""
+    head = body.lstrip()[:60].decode("utf-8", "replace")
+    what = f"HTTP {status} ({content_type or 'no content type'}, {len(body)} bytes: {head!r})"
+    if not body.lstrip().startswith(b"<"):
+        return f"{what}: not XML"
+    if status >= 400 and b"Envelope" not in body:  # a SOAP fault comes with an error status: not this
+        return what
+    return None
+
+
+def _capped(transport) -> None:
+    """Make ``transport`` (onvif-zeep-async's aiohttp transport of one service) read at most
+    :data:`MAX_REPLY_BYTES` of a reply and raise :class:`_BadReply` for one that is no SOAP reply, before
+    zeep parses it (zeep's errors for those say nothing of what came back). Replaces the transport's
+    ``_post_internal`` (onvif-zeep-async 4.3, pinned) on this instance."""
+    session = transport.session
+
+    async def post_internal(address, message, headers):
+        headers = {"Content-Type": 'text/xml; charset="utf-8"', **(headers or {})}
+        data = message.encode("utf-8") if isinstance(message, str) else message
+        response = await session.post(address, data=data, headers=headers, proxy=transport.proxy)
+        try:
+            chunks, size = [], 0
+            async for chunk in response.content.iter_any():
+                size += len(chunk)
+                if size > MAX_REPLY_BYTES:
+                    raise _BadReply(f"HTTP {response.status} ({response.content_type}): a reply of more than "
+                                    f"{MAX_REPLY_BYTES >> 10} KiB, not read further")
+                chunks.append(chunk)
+        finally:
+            response.release()
+        body = b"".join(chunks)
+        why = describe_reply(response.status, response.content_type, body)
+        if why is not None:
+            raise _BadReply(why)
+        return response, body
+
+    transport._post_internal = post_internal
+
+
 @dataclass
 class OnvifUrl:
     """``onvif://[USER:PASSWORD@]HOST[:PORT]`` taken apart."""
@@ -144,6 +198,7 @@ class OnvifDriver(DriverBase):
         self._loop: asyncio.AbstractEventLoop | None = None
         self._wakeup: asyncio.Event | None = None
         self._unauthorised = False
+        self._not_onvif = False
         #: what discovery found: profile token, move modes, whether position and move status are reported
         self.discovered: dict = {}
         # motion book-keeping (worker only): the goal in device units, the estimate, the move's deadline
@@ -167,12 +222,14 @@ class OnvifDriver(DriverBase):
         self._url = OnvifUrl.parse(self._raw_url)
 
     def _hopeless(self) -> bool:
-        return self._unauthorised
+        return self._unauthorised or self._not_onvif
 
     def _connect_error(self, timeout: float) -> PtzError:
         reason = self.last_error or "no answer"
         if self._unauthorised:
             return PtzPortError(f"{self.port}: the camera refused the user name or password ({reason})")
+        if self._not_onvif:
+            return PtzError(f"{self.port}: not an ONVIF PTZ camera: {reason}")
         return PtzError(f"{self.port}: no ONVIF PTZ camera within {timeout:g} s ({reason})")
 
     def _wake(self) -> None:
@@ -236,10 +293,10 @@ class OnvifDriver(DriverBase):
                 await self._serve(cam)
             except _LinkLost as exc:
                 if not self._stop.is_set():
-                    self._fail(str(exc), isinstance(exc, _Unauthorised))
+                    self._fail(exc)
             except Exception as exc:  # anything the library raised that _call did not classify
                 if not self._stop.is_set():
-                    self._fail(f"{type(exc).__name__}: {exc}", False)
+                    self._fail(_LinkLost(f"{type(exc).__name__}: {exc}"))
             finally:
                 self._connected.clear()
                 if cam is not None:
@@ -248,11 +305,15 @@ class OnvifDriver(DriverBase):
                 await self._sleep(backoff)
                 backoff = min(2 * backoff, self._link.reconnect_backoff_s[1])
 
-    def _fail(self, reason: str, unauthorised: bool) -> None:
+    def _fail(self, exc: _LinkLost) -> None:
+        """The session failed with ``exc``; before a first connection, refused credentials and an answer that
+        is no ONVIF PTZ camera's end :meth:`connect`'s wait (the worker goes on trying meanwhile)."""
+        unauthorised = isinstance(exc, _Unauthorised)
         self._unauthorised = unauthorised or (self._unauthorised and not self._ever_connected)
+        self._not_onvif = isinstance(exc, _NotOnvif) and not self._ever_connected
         if unauthorised:
             self._count("unauthorised")
-        self._link_lost(reason)
+        self._link_lost(str(exc))
 
     async def _sleep(self, seconds: float) -> None:
         """Sleep up to ``seconds``, waking early for a new target, a query or a stop."""
@@ -283,6 +344,7 @@ class OnvifDriver(DriverBase):
         self._count("commands")
         t0 = time.perf_counter()
         why = ""
+        malformed = False
         try:
             reply = await asyncio.wait_for(getattr(service, name)(params or {}), self._link.ack_timeout_s)
         except zeep.exceptions.Fault as exc:
@@ -291,7 +353,7 @@ class OnvifDriver(DriverBase):
             if "NotAuthorized" in subcode or "NotAuthorized" in text or "not authori" in text.lower():
                 raise _Unauthorised(f"{operation}: {text}") from None
             self._count("faults", "errors")
-            log.warning("PTZ ONVIF: %s refused: %s", operation, text)
+            self._warn("PTZ ONVIF: %s refused: %s", operation, text)
             if fatal:
                 raise _LinkLost(f"{operation} refused: {text}") from None
             self._silent = 0  # the camera answered
@@ -301,13 +363,16 @@ class OnvifDriver(DriverBase):
             why = f"no answer to {operation} within {self._link.ack_timeout_s:g} s"
         except (aiohttp.ClientConnectionError, ConnectionError) as exc:
             raise _LinkLost(f"{operation}: {exc or type(exc).__name__}") from None
+        except _BadReply as exc:
+            self._count("malformed", "errors")
+            why, malformed = f"{operation} got {exc}", True
         except Exception as exc:  # malformed replies surface as many types from zeep, lxml and the library
             if self._is_http_auth_failure(exc):
                 raise _Unauthorised(f"{operation}: HTTP 401") from None
             if isinstance(exc, aiohttp.ClientError) or "Cannot connect" in str(exc):
                 raise _LinkLost(f"{operation}: {exc}") from None
             self._count("malformed", "errors")
-            why = f"malformed reply to {operation}: {type(exc).__name__}: {str(exc)[:120]}"
+            why, malformed = f"malformed reply to {operation}: {type(exc).__name__}: {str(exc)[:120]}", True
         else:
             self._silent = 0
             if kind:
@@ -315,9 +380,11 @@ class OnvifDriver(DriverBase):
                     self._latency[kind].append(time.perf_counter() - t0)
             return True if reply is None else reply  # an empty response (AbsoluteMoveResponse) is a success
         self._silent += 1
-        log.warning("PTZ ONVIF: %s", why)
-        if fatal or self._silent >= self._link.max_silent:
-            raise _LinkLost(why if fatal else f"{self._silent} requests in a row failed ({why})")
+        self._warn("PTZ ONVIF: %s", why)
+        if fatal:
+            raise (_NotOnvif if malformed else _LinkLost)(why)
+        if self._silent >= self._link.max_silent:
+            raise _LinkLost(f"{self._silent} requests in a row failed ({why})")
         return None
 
     @staticmethod
@@ -339,7 +406,7 @@ class OnvifDriver(DriverBase):
             raise
         with self._cond:
             self._sent_seq = 0  # the latest target is sent again
-        self._unauthorised = False
+        self._unauthorised = self._not_onvif = False
         after = self._link_up()
         d = self.discovered
         log.info("PTZ connected on %s (ONVIF, profile %s, %s moves, status: %s)%s", self.port,
@@ -349,6 +416,7 @@ class OnvifDriver(DriverBase):
     async def _discover(self, cam) -> None:
         self._silent = 0
         device = await cam.create_devicemgmt_service()
+        _capped(device.transport)
         services = await self._call(device, "GetServices", {"IncludeCapability": False}, fatal=True)
         xaddrs = {}
         for s in services or []:
@@ -366,16 +434,18 @@ class OnvifDriver(DriverBase):
         for ns, what in (("http://www.onvif.org/ver10/media/wsdl", "media"),
                          ("http://www.onvif.org/ver20/ptz/wsdl", "PTZ")):
             if ns not in xaddrs:
-                raise _LinkLost(f"the camera offers no {what} service")
+                raise _NotOnvif(f"the camera offers no {what} service")
         media = await cam.create_media_service()
         ptz = await cam.create_ptz_service()
+        for svc in (media, ptz):
+            _capped(svc.transport)
         for svc in (device, media, ptz):
             for client in (svc.zeep_client, svc.zeep_client_authless):
                 client.plugins.append(self._egress)
         profiles = await self._call(media, "GetProfiles", fatal=True) or []
         chosen = next((p for p in profiles if getattr(p, "PTZConfiguration", None) is not None), None)
         if chosen is None or not isinstance(getattr(chosen, "token", None), str):
-            raise _LinkLost("no media profile with a PTZ configuration")
+            raise _NotOnvif("no media profile with a PTZ configuration")
         config_token = getattr(chosen.PTZConfiguration, "token", None)
         options = await self._call(ptz, "GetConfigurationOptions", {"ConfigurationToken": config_token}, fatal=True)
         spaces = getattr(options, "Spaces", None)
@@ -387,7 +457,7 @@ class OnvifDriver(DriverBase):
                                     ("relative", "RelativePanTiltTranslationSpace"),
                                     ("continuous", "ContinuousPanTiltVelocitySpace")) if offered(space)]
         if not modes:
-            raise _LinkLost("the camera offers no pan/tilt move (no absolute, relative or continuous space)")
+            raise _NotOnvif("the camera offers no pan/tilt move (no absolute, relative or continuous space)")
         zoom_modes = [m for m, space in (("absolute", "AbsoluteZoomPositionSpace"),
                                          ("relative", "RelativeZoomTranslationSpace"),
                                          ("continuous", "ContinuousZoomVelocitySpace")) if offered(space)]
