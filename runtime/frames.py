@@ -2,7 +2,9 @@
 
 :class:`VideoSource`, :class:`FolderSource`, :class:`DeviceSource` and :class:`NetworkSource`
 (``rtsp://``, ``http://`` MJPEG, through OpenCV's FFmpeg, reconnecting when the stream drops)
-are the readers;
+are the readers; :meth:`Source.stamped` gives each frame with the time it arrived at the process
+(live sources: when its bytes were in, before decoding; OpenCV hands over no stream time stamp
+usable as a clock, RTP/RTCP or MJPEG part headers, so arrival is the origin of a frame's age);
 the real-time loop runs them as they are, a broken frame yielded as ``None`` and
 reading going on (:func:`open_source`). :func:`read_frames` is the strict use of the
 same readers for offline commands: an unreadable image or a change of frame size is
@@ -39,6 +41,12 @@ class Source(abc.ABC):
     @abc.abstractmethod
     def frames(self) -> Iterator[np.ndarray | None]:
         """RGB uint8 frames in order; ``None`` for a frame that could not be read."""
+
+    def stamped(self) -> Iterator[tuple[np.ndarray | None, float]]:
+        """:meth:`frames` with the ``time.monotonic()`` each arrived at the process (here: when it was read;
+        live sources stamp it before decoding)."""
+        for img in self.frames():
+            yield img, time.monotonic()
 
     def describe(self, index: int) -> str:
         """Where frame ``index`` comes from, for messages."""
@@ -118,15 +126,21 @@ class DeviceSource(Source):
         self.live = True
 
     def frames(self):
+        for img, _ in self.stamped():
+            yield img
+
+    def stamped(self):
         broken = 0
         while broken < self.max_broken:
-            ok, img = self._cap.read()
+            ok = self._cap.grab()
+            t = time.monotonic()
+            ok, img = self._cap.retrieve() if ok else (False, None)
             if ok and img is not None:
                 broken = 0
-                yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+                yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB), t
             else:
                 broken += 1
-                yield None
+                yield None, t
 
     def close(self):
         self._cap.release()
@@ -141,13 +155,14 @@ class NetworkSource(Source):
 
     When the stream drops (a read fails or times out), the source yields ``None`` (one broken
     frame), then reopens it with exponential back-off (``backoff_s``: first and longest delay)
-    and goes on, counting ``reconnects`` and the ``outage_s`` spent without frames; the stream
-    ends only after ``give_up_s`` without a frame, or on :meth:`close`. Frames are stamped with
-    the capture clock (``live``). The first open failing is a :class:`SourceError`.
+    and goes on, counting ``reconnects`` and the ``outage_s`` without frames (from the last frame
+    before the drop to the first after it); the stream ends only after ``give_up_s`` without a
+    frame, or on :meth:`close`. Frames are stamped with their arrival (``live``). The first open
+    failing is a :class:`SourceError`.
     """
 
     def __init__(self, url: str, open_timeout_s: float = 5.0, read_timeout_s: float = 2.0,
-                 backoff_s: tuple[float, float] = (0.1, 2.0), give_up_s: float = 60.0):
+                 backoff_s: tuple[float, float] = (0.1, 1.0), give_up_s: float = 60.0):
         self.url, self.name, self.live = url, url, True
         self.open_timeout_s, self.read_timeout_s = open_timeout_s, read_timeout_s
         self.backoff_s, self.give_up_s = backoff_s, give_up_s
@@ -171,18 +186,32 @@ class NetworkSource(Source):
         return None
 
     def frames(self):
+        for img, _ in self.stamped():
+            yield img
+
+    def stamped(self):
         self._reading = True
+        last = down = None  # arrival of the last frame; where the outage under way began
         try:
             while not self._closed.is_set():
-                ok, img = self._cap.read() if self._cap is not None else (False, None)
+                ok = self._cap.grab() if self._cap is not None else False
+                t = time.monotonic()  # the frame's bytes are in: its arrival, before it is decoded
+                ok, img = self._cap.retrieve() if ok else (False, None)
                 if ok and img is not None:
-                    yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+                    if down is not None:
+                        self.counters["outage_s"] += t - down
+                        down = None
+                    last = t
+                    yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB), t
                     continue
                 if self._closed.is_set():
                     return
                 self.counters["drops"] += 1
-                yield None
+                if down is None:
+                    down = t if last is None else last
+                yield None, t
                 if not self._reconnect():
+                    self.counters["outage_s"] += time.monotonic() - down
                     return
         finally:
             self._reading = False
@@ -197,19 +226,16 @@ class NetworkSource(Source):
             self._cap = None
         t0 = time.monotonic()
         delay = self.backoff_s[0]
-        try:
-            while not self._closed.wait(delay):
-                self._cap = self._open()
-                if self._cap is not None:
-                    self.counters["reconnects"] += 1
-                    return True
-                self.counters["failed_opens"] += 1
-                if time.monotonic() - t0 > self.give_up_s:
-                    return False
-                delay = min(2 * delay, self.backoff_s[1])
-            return False
-        finally:
-            self.counters["outage_s"] += time.monotonic() - t0
+        while not self._closed.wait(delay):
+            self._cap = self._open()
+            if self._cap is not None:
+                self.counters["reconnects"] += 1
+                return True
+            self.counters["failed_opens"] += 1
+            if time.monotonic() - t0 > self.give_up_s:
+                return False
+            delay = min(2 * delay, self.backoff_s[1])
+        return False
 
     def close(self):
         """Stop reading; the capture is released here, or by the reading thread when it notices."""

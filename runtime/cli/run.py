@@ -13,10 +13,13 @@ HELP = ("track people with the omni camera (device, stream, video or image folde
 DESCRIPTION = """\
 SOURCE is a camera index (0, 1, ...), a network stream (rtsp://..., http://... MJPEG,
 read through OpenCV's FFmpeg; when it drops, it is reopened with back-off, 0.1 s
-doubling to 2 s, for up to 60 s, and the reconnects are counted in summary.json
-stream {reconnects, drops, failed_opens, outage_s}), a video file or a folder of
-images. A capture thread keeps only the newest frame (late frames are dropped and
-counted). The
+doubling to 1 s, for up to 60 s, and the reconnects are counted in summary.json
+stream {reconnects, drops, failed_opens, outage_s: the time without frames}), a video
+file or a folder of images. A capture thread keeps only the newest frame (late frames
+are dropped and counted); a camera or a stream is drained from the moment it is opened,
+also while the loop starts up, so that the loop always acts on the newest frame, never
+on a backlog: summary.json frame_age_ms {p50, p99} (from a frame's arrival to its PTZ
+bytes) and log.jsonl wait_ms, age_ms per frame show it. The
 background is learnt from frames spread over the first seconds (--background-frames over
 --background-seconds: people standing through less than half of them are not learnt) and
 keeps itself right while running (ghosts of people who left are re-learnt, what stays

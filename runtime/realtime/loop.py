@@ -111,9 +111,11 @@ class Timings:
     """Per-stage and end-to-end times (ms)."""
 
     stages: dict[str, Samples] = field(default_factory=lambda: {s: Samples() for s in STAGES})
-    latency: Samples = field(default_factory=Samples)  # frame available -> PTZ bytes written (driver's stamps)
-    compute: Samples = field(default_factory=Samples)  # frame available -> command handed to the driver
+    latency: Samples = field(default_factory=Samples)  # frame arrived -> PTZ bytes written (driver's stamps)
+    compute: Samples = field(default_factory=Samples)  # frame arrived -> command handed to the driver
     frame: Samples = field(default_factory=Samples)
+    #: every processed frame: arrived -> its PTZ bytes written, or (nothing written for it) -> its step's end
+    age: Samples = field(default_factory=Samples)
 
     @staticmethod
     def stats(samples: Samples) -> dict:
@@ -172,7 +174,7 @@ class RealTimeLoop:
         self._stop = threading.Event()
         self._old_handlers: dict = {}
         self.t_start = time.monotonic()
-        self._pending: dict[int, float] = {}  # driver sequence number -> frame available time
+        self._pending: dict[int, tuple[float, float]] = {}  # driver sequence number -> (frame arrived, step ended)
         self.stop_reason = "source ended"
         self.off_path: OffPath | None = None
         self._framable: set[int] = set()
@@ -228,6 +230,7 @@ class RealTimeLoop:
         last_status = t_start
         self.off_path = OffPath(self.log_path, self.on_frame, self._describe, self._record,
                                 block=not getattr(self.capture, "paced", True))
+        self.capture.begin()
         try:
             while not self._stop.is_set():
                 if self.cfg.max_frames is not None and self.counts["frames"] >= self.cfg.max_frames:
@@ -277,6 +280,7 @@ class RealTimeLoop:
             return
         self.counts["frames"] += 1
         t = time.monotonic()
+        record["wait_ms"] = round(1e3 * (t - frame.t), 3)  # how old it was when taken: a backlog shows here
         op = None
         if self.operator is not None:
             swap = self.operator.take_zones()
@@ -315,12 +319,16 @@ class RealTimeLoop:
             self._send(command, frame.stamp)
         t_sent = time.monotonic()
         self._record("send", t)
+        record["age_ms"] = round(1e3 * (t_sent - frame.t), 3)
         if command is not None and command.sent:
             self.timings.compute.append(1e3 * (t_sent - frame.t))
             if self.driver is None:
                 self.timings.latency.append(1e3 * (t_sent - frame.t))
+                self.timings.age.append(1e3 * (t_sent - frame.t))
             else:
-                self._pending[self.driver.sequence] = frame.t
+                self._pending[self.driver.sequence] = (frame.t, t_sent)
+        else:
+            self.timings.age.append(1e3 * (t_sent - frame.t))
         self._collect_writes()
         if self.on_control is not None:
             record.update(self.on_control(record, frame) or {})
@@ -434,11 +442,13 @@ class RealTimeLoop:
         if self.driver is None:
             return
         for seq, t_write in self.driver.take_writes():
-            t_frame = self._pending.pop(seq, None)
-            if t_frame is not None:
-                self.timings.latency.append(1e3 * (t_write - t_frame))
-            for k in [k for k in self._pending if k < seq]:
-                del self._pending[k]
+            pending = self._pending.pop(seq, None)
+            if pending is not None:
+                self.timings.latency.append(1e3 * (t_write - pending[0]))
+                self.timings.age.append(1e3 * (t_write - pending[0]))
+            for k in [k for k in self._pending if k < seq]:  # superseded before the wire: aged until its step ended
+                t_frame, t_step = self._pending.pop(k)
+                self.timings.age.append(1e3 * (t_step - t_frame))
 
     def home(self, wait_s: float = 3.0) -> bool:
         """Send the PTZ home (end of run); whether it reported being there within ``wait_s``."""
@@ -504,6 +514,7 @@ class RealTimeLoop:
             "seconds": getattr(self, "elapsed", 0.0),
             "stop_reason": self.stop_reason,
             "latency_ms": Timings.stats(self.timings.latency),
+            "frame_age_ms": Timings.stats(self.timings.age),
             "compute_latency_ms": Timings.stats(self.timings.compute),
             "frame_ms": Timings.stats(self.timings.frame),
             "stages_ms": {k: Timings.stats(v) for k, v in self.timings.stages.items()},
@@ -511,6 +522,7 @@ class RealTimeLoop:
             "faults": {"broken_frames": self.capture.counts["broken"],
                        "wrong_size_frames": self.capture.counts["wrong_size"],
                        "stale_frames": self.capture.counts["stale"], "dropped_frames": self.capture.counts["dropped"],
+                       "skipped_at_start": self.capture.counts["skipped_at_start"],
                        "deadline_overruns": self.counts["deadline_overruns"],
                        "source_ended": self.stop_reason == "source ended"},
             "off_path": self.off_path.summary() if self.off_path is not None else None,

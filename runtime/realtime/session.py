@@ -227,19 +227,40 @@ def _source_counters(source) -> dict | None:
 def _start(rig: Rig, source: Source, stage: Path, *, driver, profile, config: LoopConfig, paced: bool, n_bg: int,
            background_seconds: float | None, video: bool, record: bool, title: str, foveal, hooks: tuple,
            control_hooks: tuple, screenshot_at: int | None, console=None, mqtt=None):
-    """Start-up of :func:`run_session`: the background, the detector, the writers, the loop, compiled."""
+    """Start-up of :func:`run_session`: the background, the detector, the writers, the loop, compiled.
+
+    A live source's capture starts first and drains the source throughout (the background is learnt from
+    it), so that the loop starts on the newest frame, not on what piled up while it compiled."""
     W, H = rig.omni.image_size
-    frames = source.frames()
+    capture = Capture(source, paced=paced, shape=(H, W, 3)).start() if source.live else None
+    try:
+        return _start_on(capture, rig, source, stage, driver=driver, profile=profile, config=config, paced=paced,
+                         n_bg=n_bg, background_seconds=background_seconds, video=video, record=record, title=title,
+                         foveal=foveal, hooks=hooks, control_hooks=control_hooks, screenshot_at=screenshot_at,
+                         console=console, mqtt=mqtt)
+    except BaseException:
+        if capture is not None:
+            capture.stop()
+        raise
+
+
+def _start_on(capture: Capture | None, rig: Rig, source: Source, stage: Path, *, driver, profile, config: LoopConfig,
+              paced: bool, n_bg: int, background_seconds: float | None, video: bool, record: bool, title: str, foveal,
+              hooks: tuple, control_hooks: tuple, screenshot_at: int | None, console=None, mqtt=None):
+    W, H = rig.omni.image_size
+    frames = source.stamped() if capture is None else None
     seconds = rig.detection.background_seconds if background_seconds is None else background_seconds
     step = learning_step(source.fps, n_bg, seconds)
-    bg, used, first = learn_from_frames(frames, n_bg, step, source.name)
+    images = capture.images() if capture is not None else (img for img, _ in frames)
+    bg, used, first = learn_from_frames(images, n_bg, step, source.name)
     if bg.mean.shape[:2] != (H, W):
         raise UsageError(f"{source.name}: frames are {bg.mean.shape[1]}x{bg.mean.shape[0]}, "
                          f"expected {W}x{H} (omni.image_size of the rig)")
     detector = build_detector(rig)
     writer = VideoOut(stage, source.fps or 25.0, (W + W // 2, H)) if video else None
     annot = Annotator(rig, title, foveal, [writer.write] if writer else [])
-    capture = Capture(source, paced=paced, frames=frames, first_index=first, shape=(H, W, 3))
+    if capture is None:
+        capture = Capture(source, paced=paced, frames=frames, first_index=first, shape=(H, W, 3))
     drawn = video or screenshot_at is not None or console is not None
     loop = RealTimeLoop(rig, detector, bg, capture, driver, profile, config, stage / "log.jsonl",
                         on_frame=chain_hooks(*hooks, annot if drawn else None),
