@@ -135,7 +135,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{command}: error: {exc}", file=sys.stderr)
             return 2
         except KeyboardInterrupt as exc:
-            if isinstance(exc, Interrupted) and exc.unwritten is None and not exc.written and args is not None:
+            if (isinstance(exc, Interrupted) and exc.unwritten is None and not exc.written and exc.kept is None
+                    and args is not None):
                 exc.unwritten = getattr(args, "out", None)  # interrupted before its outputs were staged
             what = exc.describe() if isinstance(exc, Interrupted) else "interrupted"
             print(f"{command}: {what}", file=sys.stderr)

@@ -172,6 +172,9 @@ class RealTimeLoop:
         self._arrive_at = 0.0
         self._sent_track: int | None = None
         self._stop = threading.Event()
+        #: set by a second Ctrl-C or SIGTERM (``hurried_by``): finish quickly, keeping what was recorded
+        self.hurry = threading.Event()
+        self.hurried_by: str | None = None
         self._old_handlers: dict = {}
         self.t_start = time.monotonic()
         self._pending: dict[int, tuple[float, float]] = {}  # driver sequence number -> (frame arrived, step ended)
@@ -191,9 +194,19 @@ class RealTimeLoop:
         self._stop.set()
 
     def install_signal_handlers(self) -> None:
-        """Ctrl-C and SIGTERM end the loop cleanly (PTZ home, summary written); see :meth:`restore_signal_handlers`."""
+        """Ctrl-C and SIGTERM end the loop cleanly (PTZ home, summary written); a second one while the outputs are
+        written sets :attr:`hurry`: what is left is cut short (no more drawing, no wait for the PTZ to get home)
+        and what was recorded is kept. Until :meth:`restore_signal_handlers`."""
         for sig in (signal.SIGINT, signal.SIGTERM):
-            self._old_handlers[sig] = signal.signal(sig, lambda s, _f: self.stop(signal.Signals(s).name))
+            self._old_handlers[sig] = signal.signal(sig, self._on_signal)
+
+    def _on_signal(self, signum: int, _frame) -> None:
+        name = signal.Signals(signum).name
+        if not self._stop.is_set():
+            self.stop(name)
+        elif not self.hurry.is_set():
+            self.hurried_by = name
+            self.hurry.set()
 
     def restore_signal_handlers(self) -> None:
         """Put back the handlers :meth:`install_signal_handlers` replaced."""
@@ -229,7 +242,7 @@ class RealTimeLoop:
         self.t_start = t_start = time.monotonic()
         last_status = t_start
         self.off_path = OffPath(self.log_path, self.on_frame, self._describe, self._record,
-                                block=not getattr(self.capture, "paced", True))
+                                block=not getattr(self.capture, "paced", True), hurry=self.hurry)
         self.capture.begin()
         try:
             while not self._stop.is_set():
@@ -451,11 +464,12 @@ class RealTimeLoop:
                 self.timings.age.append(1e3 * (t_step - t_frame))
 
     def home(self, wait_s: float = 3.0) -> bool:
-        """Send the PTZ home (end of run); whether it reported being there within ``wait_s``."""
+        """Send the PTZ home (end of run); whether it reported being there within ``wait_s`` (not waited for
+        once :attr:`hurry` is set)."""
         if self.driver is None:
             return True
         self.driver.set_target(*self.cfg.home)
-        reached = self.driver.wait_reached(wait_s)
+        reached = self.driver.wait_reached(wait_s, cancel=self.hurry)
         self._collect_writes()
         return reached
 

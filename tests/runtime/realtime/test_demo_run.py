@@ -176,6 +176,53 @@ def test_run_on_a_video_with_the_emulator_stops_cleanly_on_sigterm(demo_out, tmp
     assert all(0 <= r["wait_ms"] <= r["age_ms"] for r in log)
 
 
+def test_a_second_signal_while_writing_keeps_what_was_recorded(demo_out, tmp_path):
+    """SIGINT then SIGTERM at once (a second Ctrl-C while ``run`` writes its outputs): the loop stops at the
+    first, the second cuts the finishing short (no more drawing, no wait for the PTZ to get home), and what
+    was recorded is kept, not thrown away: summary.json and every processed frame's log line are in the
+    output folder, nothing is left staged, exit 130 with one last line saying so."""
+    from runtime.ptz import PtyEmulator, default_profile
+
+    out = tmp_path / "run"
+    with PtyEmulator(default_profile("visca")) as emulator:
+        proc = omnijax("run", str(demo_out / "omni.avi"), "--config", PAPER, "--ptz", emulator.path,
+                       "--out", str(out), "--pace", "all", "--quiet", "--background-seconds", "0")
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline and proc.poll() is None:
+            logs = list(tmp_path.glob(".run.partial-*/log.jsonl"))
+            if logs and len(logs[0].read_text().splitlines()) >= 30:  # written line by line: there as it runs
+                proc.send_signal(signal.SIGINT)
+                proc.send_signal(signal.SIGTERM)
+                break
+            time.sleep(0.05)
+        _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr[-2000:]
+    last = stderr.strip().splitlines()[-1]
+    assert last == (f"omnijax run: interrupted by SIGTERM while writing the outputs; what was recorded is in {out}, "
+                    "the rest cut short (summary.json finish_cut_short)"), stderr[-2000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["stop_reason"] == "SIGINT" and s["finish_cut_short"] == "SIGTERM" and not s["ptz_homed"]
+    assert s["frames"] >= 30
+    log = (out / "log.jsonl").read_text().splitlines()
+    assert len(log) == s["frames"] and all(json.loads(line)["frame"] >= 0 for line in log)
+    assert not list(tmp_path.glob(".run.partial-*"))
+
+
+def test_the_last_line_says_when_the_ptz_did_not_get_home(capsys, tmp_path):
+    from runtime.cli.run import report
+
+    summary = {"frames": 10, "fps": 5.0, "stop_reason": "SIGINT", "latency_ms": {"p50": 1.0, "p99": 2.0},
+               "frame_age_ms": {"p50": 3.0, "p99": 4.0}, "ptz": {"commands": 3, "errors": 0, "reconnects": 0},
+               "ptz_homed": True}
+    report(summary, tmp_path)
+    got = capsys.readouterr()
+    assert got.err == "" and "frame age p50 3.00 ms" in got.out
+    report({**summary, "ptz_homed": False}, tmp_path)
+    got = capsys.readouterr()
+    assert got.err.splitlines() == ["omnijax run: warning: the PTZ did not report its home position at the end "
+                                    "(summary.json ptz_homed: false); it may still point where the run left it"]
+
+
 @pytest.mark.slow
 def test_run_on_a_live_stream_acts_on_the_newest_frame_and_shows_an_outage(demo_out, tmp_path):
     """``omnijax run http://...`` the way issue 24 found it: the demo's recorded omni frames served as MJPEG at
