@@ -113,8 +113,38 @@ class FolderSource(Source):
         return str(self.files[index])
 
 
+class _Outages:
+    """A live source's ``counters``: ``drops`` (failed reads), ``outage_s`` (time without frames: from the last
+    frame before a failure to the first after it), and the ``reconnects`` and ``failed_opens`` a source that
+    reopens itself counts."""
+
+    def __init__(self) -> None:
+        self.counters = {"reconnects": 0, "drops": 0, "failed_opens": 0, "outage_s": 0.0}
+        self._last: float | None = None
+        self._down: float | None = None
+
+    def frame(self, t: float) -> None:
+        """A frame arrived at ``t``: an outage under way ends."""
+        if self._down is not None:
+            self.counters["outage_s"] += t - self._down
+            self._down = None
+        self._last = t
+
+    def failed(self, t: float) -> None:
+        """A read failed at ``t``: an outage begins at the last frame (unless one is under way)."""
+        self.counters["drops"] += 1
+        if self._down is None:
+            self._down = t if self._last is None else self._last
+
+    def ended(self, t: float) -> None:
+        """The source ends at ``t`` (given up, or closed) during an outage: it lasted until then."""
+        if self._down is not None:
+            self.frame(t)
+
+
 class DeviceSource(Source):
-    """A camera device by index (OpenCV); a failed grab is yielded as ``None``."""
+    """A camera device by index (OpenCV); a failed grab is yielded as ``None``, counted in ``counters``
+    (``drops``, ``outage_s``) as a network stream's are."""
 
     def __init__(self, index: int, max_broken: int = 50):
         self._cap = cv2.VideoCapture(index)
@@ -124,6 +154,8 @@ class DeviceSource(Source):
         self.fps = fps if fps and fps > 0 else None
         self.name, self.max_broken = f"camera {index}", max_broken
         self.live = True
+        self._outages = _Outages()
+        self.counters = self._outages.counters
 
     def frames(self):
         for img, _ in self.stamped():
@@ -133,14 +165,17 @@ class DeviceSource(Source):
         broken = 0
         while broken < self.max_broken:
             ok = self._cap.grab()
-            t = time.monotonic()
+            t = time.monotonic()  # the frame is in: its arrival, before it is decoded
             ok, img = self._cap.retrieve() if ok else (False, None)
             if ok and img is not None:
                 broken = 0
+                self._outages.frame(t)
                 yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB), t
             else:
                 broken += 1
+                self._outages.failed(t)
                 yield None, t
+        self._outages.ended(time.monotonic())
 
     def close(self):
         self._cap.release()
@@ -166,7 +201,8 @@ class NetworkSource(Source):
         self.url, self.name, self.live = url, url, True
         self.open_timeout_s, self.read_timeout_s = open_timeout_s, read_timeout_s
         self.backoff_s, self.give_up_s = backoff_s, give_up_s
-        self.counters = {"reconnects": 0, "drops": 0, "failed_opens": 0, "outage_s": 0.0}
+        self._outages = _Outages()
+        self.counters = self._outages.counters
         self._closed = threading.Event()
         self._reading = False
         self._cap = self._open()
@@ -191,27 +227,21 @@ class NetworkSource(Source):
 
     def stamped(self):
         self._reading = True
-        last = down = None  # arrival of the last frame; where the outage under way began
         try:
             while not self._closed.is_set():
                 ok = self._cap.grab() if self._cap is not None else False
                 t = time.monotonic()  # the frame's bytes are in: its arrival, before it is decoded
                 ok, img = self._cap.retrieve() if ok else (False, None)
                 if ok and img is not None:
-                    if down is not None:
-                        self.counters["outage_s"] += t - down
-                        down = None
-                    last = t
+                    self._outages.frame(t)
                     yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB), t
                     continue
                 if self._closed.is_set():
                     return
-                self.counters["drops"] += 1
-                if down is None:
-                    down = t if last is None else last
+                self._outages.failed(t)
                 yield None, t
                 if not self._reconnect():
-                    self.counters["outage_s"] += time.monotonic() - down
+                    self._outages.ended(time.monotonic())
                     return
         finally:
             self._reading = False

@@ -115,3 +115,20 @@ def test_a_live_stream_is_drained_and_the_loop_gets_the_newest_frame():
     arrivals = np.array([f.t for f, _, _ in taken])
     assert 0.9 < np.diff(arrivals).max() < 2.5
     assert 0.9 < source.counters["outage_s"] < 2.5 and source.counters["reconnects"] == 1
+
+
+def test_an_outage_lasts_from_the_last_frame_to_the_next():
+    """What a live source (camera or stream) counts: the time without frames, however late a failure is seen."""
+    from runtime.frames import _Outages
+
+    o = _Outages()
+    o.failed(0.5)  # before any frame: from the failure
+    o.frame(1.0)
+    o.frame(1.04)
+    o.failed(2.5)  # seen late (a read time-out): the outage began with the last frame
+    o.failed(2.6)
+    o.frame(6.04)
+    o.failed(7.0)
+    o.ended(9.0)  # never came back
+    assert o.counters["drops"] == 4
+    assert o.counters["outage_s"] == pytest.approx(0.5 + 5.0 + 2.0)
