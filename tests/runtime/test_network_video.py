@@ -129,6 +129,6 @@ def test_an_outage_lasts_from_the_last_frame_to_the_next():
     o.failed(2.6)
     o.frame(6.04)
     o.failed(7.0)
-    o.ended(9.0)  # never came back
+    o.ended(9.0)  # never came back: 6.04 to 9.0
     assert o.counters["drops"] == 4
-    assert o.counters["outage_s"] == pytest.approx(0.5 + 5.0 + 2.0)
+    assert o.counters["outage_s"] == pytest.approx(0.5 + 5.0 + 2.96)
