@@ -1,8 +1,8 @@
 """The ``omnijax`` command line: one subcommand per job, each a module of ``runtime/cli/``.
 
-Exit codes: 0 success, 2 bad input (one line on stderr naming what was wrong and
-what was expected), 130 interrupted (Ctrl-C or SIGTERM; one line), 141 the reader of
-stdout went away (quietly).
+Exit codes: 0 success (a real-time run stopped by Ctrl-C or SIGTERM included), 2 bad
+input (one line on stderr naming what was wrong and what was expected), 130 interrupted
+(Ctrl-C or SIGTERM; one line), 141 the reader of stdout went away (quietly).
 """
 
 from __future__ import annotations
@@ -33,7 +33,9 @@ Rig files are TOML (see configs/paper.toml for every key, with units).
 
 Exit codes: 0 done; 2 bad input (a config, file, flag or port), with one line on
 stderr naming what was wrong, found before any work and leaving nothing behind;
-130 interrupted (Ctrl-C or SIGTERM, at any moment; nothing half-written);
+130 interrupted (Ctrl-C or SIGTERM, at any moment; nothing half-written), except
+that a running `run` or `demo` is stopped by them: the PTZ goes home, everything
+is written, exit 0 (a second one while it writes keeps what was recorded, 130);
 141 the reader of stdout went away (omnijax ... | head -1: ends quietly).
 """
 
