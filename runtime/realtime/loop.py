@@ -111,9 +111,11 @@ class Timings:
     """Per-stage and end-to-end times (ms)."""
 
     stages: dict[str, Samples] = field(default_factory=lambda: {s: Samples() for s in STAGES})
-    latency: Samples = field(default_factory=Samples)  # frame available -> PTZ bytes written (driver's stamps)
-    compute: Samples = field(default_factory=Samples)  # frame available -> command handed to the driver
+    latency: Samples = field(default_factory=Samples)  # frame arrived -> PTZ bytes written (driver's stamps)
+    compute: Samples = field(default_factory=Samples)  # frame arrived -> command handed to the driver
     frame: Samples = field(default_factory=Samples)
+    #: every processed frame: arrived -> its PTZ bytes written, or (nothing written for it) -> its step's end
+    age: Samples = field(default_factory=Samples)
 
     @staticmethod
     def stats(samples: Samples) -> dict:
@@ -170,19 +172,20 @@ class RealTimeLoop:
         self._arrive_at = 0.0
         self._sent_track: int | None = None
         self._stop = threading.Event()
+        #: set by a second Ctrl-C or SIGTERM (``hurried_by``): finish quickly, keeping what was recorded
+        self.hurry = threading.Event()
+        self.hurried_by: str | None = None
         self._old_handlers: dict = {}
         self.t_start = time.monotonic()
-        self._pending: dict[int, float] = {}  # driver sequence number -> frame available time
+        self._pending: dict[int, tuple[float, float]] = {}  # driver sequence number -> (frame arrived, step ended)
         self.stop_reason = "source ended"
         self.off_path: OffPath | None = None
         self._framable: set[int] = set()
         W, H = rig.omni.image_size
         self.shape = (H, W, 3)
         self.period = 1.0 / capture.source.fps if capture.source.fps else None
-        if profile is not None:
-            self._rates = (float(profile.pan.slew_deg_s()), float(profile.tilt.slew_deg_s()))
-        else:
-            self._rates = (1.0, 1.0)
+        #: the slew rates of the moves the driver commands (the speed code it sends), deg/s
+        self._rates = profile.move_rates_deg_s() if profile is not None else (1.0, 1.0)
 
     # -- control --------------------------------------------------------------------------
 
@@ -191,9 +194,19 @@ class RealTimeLoop:
         self._stop.set()
 
     def install_signal_handlers(self) -> None:
-        """Ctrl-C and SIGTERM end the loop cleanly (PTZ home, summary written); see :meth:`restore_signal_handlers`."""
+        """Ctrl-C and SIGTERM end the loop cleanly (PTZ home, summary written); a second one while the outputs are
+        written sets :attr:`hurry`: what is left is cut short (no more drawing, no wait for the PTZ to get home)
+        and what was recorded is kept. Until :meth:`restore_signal_handlers`."""
         for sig in (signal.SIGINT, signal.SIGTERM):
-            self._old_handlers[sig] = signal.signal(sig, lambda s, _f: self.stop(signal.Signals(s).name))
+            self._old_handlers[sig] = signal.signal(sig, self._on_signal)
+
+    def _on_signal(self, signum: int, _frame) -> None:
+        name = signal.Signals(signum).name
+        if not self._stop.is_set():
+            self.stop(name)
+        elif not self.hurry.is_set():
+            self.hurried_by = name
+            self.hurry.set()
 
     def restore_signal_handlers(self) -> None:
         """Put back the handlers :meth:`install_signal_handlers` replaced."""
@@ -229,7 +242,8 @@ class RealTimeLoop:
         self.t_start = t_start = time.monotonic()
         last_status = t_start
         self.off_path = OffPath(self.log_path, self.on_frame, self._describe, self._record,
-                                block=not getattr(self.capture, "paced", True))
+                                block=not getattr(self.capture, "paced", True), hurry=self.hurry)
+        self.capture.begin()
         try:
             while not self._stop.is_set():
                 if self.cfg.max_frames is not None and self.counts["frames"] >= self.cfg.max_frames:
@@ -279,6 +293,7 @@ class RealTimeLoop:
             return
         self.counts["frames"] += 1
         t = time.monotonic()
+        record["wait_ms"] = round(1e3 * (t - frame.t), 3)  # how old it was when taken: a backlog shows here
         op = None
         if self.operator is not None:
             swap = self.operator.take_zones()
@@ -317,12 +332,16 @@ class RealTimeLoop:
             self._send(command, frame.stamp)
         t_sent = time.monotonic()
         self._record("send", t)
+        record["age_ms"] = round(1e3 * (t_sent - frame.t), 3)
         if command is not None and command.sent:
             self.timings.compute.append(1e3 * (t_sent - frame.t))
             if self.driver is None:
                 self.timings.latency.append(1e3 * (t_sent - frame.t))
+                self.timings.age.append(1e3 * (t_sent - frame.t))
             else:
-                self._pending[self.driver.sequence] = frame.t
+                self._pending[self.driver.sequence] = (frame.t, t_sent)
+        else:
+            self.timings.age.append(1e3 * (t_sent - frame.t))
         self._collect_writes()
         if self.on_control is not None:
             record.update(self.on_control(record, frame) or {})
@@ -436,18 +455,21 @@ class RealTimeLoop:
         if self.driver is None:
             return
         for seq, t_write in self.driver.take_writes():
-            t_frame = self._pending.pop(seq, None)
-            if t_frame is not None:
-                self.timings.latency.append(1e3 * (t_write - t_frame))
-            for k in [k for k in self._pending if k < seq]:
-                del self._pending[k]
+            pending = self._pending.pop(seq, None)
+            if pending is not None:
+                self.timings.latency.append(1e3 * (t_write - pending[0]))
+                self.timings.age.append(1e3 * (t_write - pending[0]))
+            for k in [k for k in self._pending if k < seq]:  # superseded before the wire: aged until its step ended
+                t_frame, t_step = self._pending.pop(k)
+                self.timings.age.append(1e3 * (t_step - t_frame))
 
     def home(self, wait_s: float = 3.0) -> bool:
-        """Send the PTZ home (end of run); whether it reported being there within ``wait_s``."""
+        """Send the PTZ home (end of run); whether it reported being there within ``wait_s`` (not waited for
+        once :attr:`hurry` is set)."""
         if self.driver is None:
             return True
         self.driver.set_target(*self.cfg.home)
-        reached = self.driver.wait_reached(wait_s)
+        reached = self.driver.wait_reached(wait_s, cancel=self.hurry)
         self._collect_writes()
         return reached
 
@@ -506,6 +528,7 @@ class RealTimeLoop:
             "seconds": getattr(self, "elapsed", 0.0),
             "stop_reason": self.stop_reason,
             "latency_ms": Timings.stats(self.timings.latency),
+            "frame_age_ms": Timings.stats(self.timings.age),
             "compute_latency_ms": Timings.stats(self.timings.compute),
             "frame_ms": Timings.stats(self.timings.frame),
             "stages_ms": {k: Timings.stats(v) for k, v in self.timings.stages.items()},
@@ -513,6 +536,7 @@ class RealTimeLoop:
             "faults": {"broken_frames": self.capture.counts["broken"],
                        "wrong_size_frames": self.capture.counts["wrong_size"],
                        "stale_frames": self.capture.counts["stale"], "dropped_frames": self.capture.counts["dropped"],
+                       "skipped_at_start": self.capture.counts["skipped_at_start"],
                        "deadline_overruns": self.counts["deadline_overruns"],
                        "source_ended": self.stop_reason == "source ended"},
             "off_path": self.off_path.summary() if self.off_path is not None else None,

@@ -230,7 +230,7 @@ def test_settling_runs_on_the_frames_clock_not_the_wall_clock(monkeypatch):
     loop = RealTimeLoop.__new__(RealTimeLoop)
     loop.driver, loop.profile, loop.sent, loop.sent_at = None, default_profile("visca"), None, None
     loop.counts = {"commands_sent": 0}
-    loop._rates = (float(loop.profile.pan.slew_deg_s()), float(loop.profile.tilt.slew_deg_s()))
+    loop._rates = loop.profile.move_rates_deg_s()
     assert not loop._settled(0.0)
     loop._send(Command(track=1, pan=0.0, tilt=-0.5, zoom=1.0, zooms={}, sd_pan=0.01, sd_tilt=0.01, sent=True,
                        t_predicted=0.0), stamp=0.0)
