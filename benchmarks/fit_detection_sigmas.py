@@ -12,9 +12,10 @@ folders, matches every visible person to the detection whose sector holds them (
 benchmarks/detection_accuracy.py: the true foot azimuth within half the sector's width + 0.05 rad;
 isolated = no other person within 0.35 rad), and
 
-- ``fit``: finds the four coefficients by maximum likelihood of a Gaussian in each error mixed with
-  a uniform outlier share (the detections of the training folders; the share is printed: errors
-  the detector's quality features do not flag), printing the TOML lines for the rig's ``[detection]``;
+- ``fit``: finds the four coefficients by maximum likelihood of a Gaussian in each error (every
+  error counts, so the NEES is honest over all detections; ``--outliers`` mixes in a uniform
+  outlier share and prints it: errors the detector's quality features do not flag), printing the
+  TOML lines for the rig's ``[detection]``;
 - ``score``: the normalised estimation error squared of r_f and theta_f under the rig's rule
   (mean and share above 6.63, the chi-square(1) 99 % point), overall and for isolated people,
   per folder pair and pooled.
@@ -25,6 +26,11 @@ Run (see docs/detection.md, "Honest sigmas"):
     omnijax detect R/omni.avi --config configs/paper.toml --out D
     .venv/bin/python benchmarks/fit_detection_sigmas.py fit --config configs/paper.toml R:D ...
     .venv/bin/python benchmarks/fit_detection_sigmas.py score --config configs/paper.toml R2:D2 ...
+
+or on the perception sweep's matched detections (its floor-gated matching, many scenes and seeds):
+
+    .venv/bin/python benchmarks/perception_sweep.py sweep --scenes ... --seeds ... --records out/rec.json
+    .venv/bin/python benchmarks/fit_detection_sigmas.py fit --config configs/paper.toml --records out/rec.json
 """
 
 from __future__ import annotations
@@ -99,20 +105,31 @@ def pooled(pairs: list[tuple[Path, Path]]) -> dict[str, np.ndarray]:
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
-def fit_component(e: np.ndarray, s: np.ndarray) -> tuple[float, float, float]:
+def fit_component(e: np.ndarray, s: np.ndarray, outliers: bool = False) -> tuple[float, float, float]:
     """(gain, extra, outlier share) maximising the likelihood of errors ``e`` under a Gaussian with
-    sigma^2 = (gain s)^2 + extra^2, mixed with a uniform outlier over the errors' range (what the
-    detector's quality features do not flag: a plain Gaussian fit lets those few inflate every
-    detection's sigma)."""
+    sigma^2 = (gain s)^2 + extra^2; with ``outliers``, mixed with a uniform outlier over the errors'
+    range. Without (the default), every error counts, so the NEES's mean is honest over all
+    detections, gross ones included (what the zoom must survive); with, the fit describes the clean
+    core and the outlier share says how much the detector's quality features do not flag."""
     width = 2 * np.max(np.abs(e))
     def nll(p):
         var = np.exp(2 * p[0]) * s**2 + np.exp(2 * p[1])
-        eps = 1 / (1 + np.exp(-p[2]))
+        eps = 1 / (1 + np.exp(-p[2])) if outliers else 0.0
         dens = (1 - eps) * np.exp(-0.5 * e**2 / var) / np.sqrt(2 * np.pi * var) + eps / width
         return -np.sum(np.log(dens))
     x0 = np.array([0.0, np.log(max(np.median(np.abs(e)), 1e-6)), -3.0])
     res = minimize(nll, x0, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9, "maxiter": 8000})
-    return float(np.exp(res.x[0])), float(np.exp(res.x[1])), float(1 / (1 + np.exp(-res.x[2])))
+    share = float(1 / (1 + np.exp(-res.x[2]))) if outliers else 0.0
+    return float(np.exp(res.x[0])), float(np.exp(res.x[1])), share
+
+
+def from_records(paths: list[Path]) -> dict[str, np.ndarray]:
+    """Matched detections written by ``perception_sweep.py --records`` (its floor-gated matching):
+    the same keys as :func:`matched`, ``isolated`` all true (the sweep's records do not say)."""
+    rows = [r for p in paths for recs in json.loads(p.read_text()).values() for r in recs]
+    a = np.array(rows, float).reshape(-1, 5)
+    return {"e_r": a[:, 1], "e_t": a[:, 2], "s_r": a[:, 3], "s_t": a[:, 4], "isolated": np.ones(len(a), bool),
+            "R": a[:, 0]}
 
 
 def nees_figures(e: np.ndarray, s: np.ndarray) -> dict:
@@ -139,14 +156,26 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("mode", choices=("fit", "score"))
     ap.add_argument("--config", required=True, help="rig TOML the detections were made with")
-    ap.add_argument("pairs", nargs="+", metavar="RENDER:DETECT", help="render and detect output folders")
+    ap.add_argument("pairs", nargs="*", metavar="RENDER:DETECT", help="render and detect output folders")
+    ap.add_argument("--records", nargs="+", type=Path, default=[],
+                    help="instead of folder pairs: matched detections written by perception_sweep.py --records")
+    ap.add_argument("--outliers", action="store_true",
+                    help="fit a uniform outlier share beside the Gaussian (the clean core's sigma; the default "
+                         "fits every error)")
     args = ap.parse_args()
     pairs = [tuple(Path(x) for x in p.split(":", 1)) for p in args.pairs]
+    if not pairs and not args.records:
+        ap.error("give RENDER:DETECT folder pairs or --records")
     rig = load_rig(args.config)
+    if args.records:
+        data = from_records(args.records)
+        if args.mode == "score":
+            print(json.dumps({"records": score(rig, data)}, indent=1))
+            return 0
     if args.mode == "fit":
-        data = pooled(pairs)
-        g_r, x_r, o_r = fit_component(data["e_r"], data["s_r"])
-        g_t, x_t, o_t = fit_component(data["e_t"], data["s_t"])
+        data = data if args.records else pooled(pairs)
+        g_r, x_r, o_r = fit_component(data["e_r"], data["s_r"], args.outliers)
+        g_t, x_t, o_t = fit_component(data["e_t"], data["s_t"], args.outliers)
         print(json.dumps({"detections": int(data["e_r"].size), "isolated": int(data["isolated"].sum()),
                           "outlier_share_r_f": o_r, "outlier_share_theta_f": o_t}))
         print(f"sigma_gain_r_f = {g_r:.4g}\nsigma_extra_r_f = {x_r:.4g}\n"

@@ -65,7 +65,7 @@ def score_lines(rig, truth_lines: list[dict], world: dict, det_lines: list[dict]
     for d in det_lines:
         z, sig = floor_and_sigmas(rig, d["people"])
         score.add_frame(d["frame"], by_frame[d["frame"]], d["people"], z, sig, history)
-    return score.summary()
+    return {**score.summary(), "records": score.records}
 
 
 def read_jsonl(path: Path) -> list[dict]:
@@ -164,15 +164,22 @@ def main() -> int:
     f.add_argument("pairs", nargs="+", metavar="RENDER:DETECT")
     for p in (s, f):
         p.add_argument("--json", type=Path, help="write every row here")
+        p.add_argument("--records", type=Path,
+                       help="write every matched detection here (floor radius m, r_f error px, theta_f error rad, "
+                            "the detector's sigmas): what fit_detection_sigmas.py --records fits")
     args = ap.parse_args()
     rows = sweep(args) if args.mode == "sweep" else folders(args)
     print(table(rows))
     print()
     print(worst_and_median(rows))
     print("\nFA causes:", ", ".join(FA_CAUSES), "| miss causes:", ", ".join(MISS_CAUSES))
+    if args.records:
+        args.records.parent.mkdir(parents=True, exist_ok=True)
+        args.records.write_text(json.dumps({f"{r['scene']}:{r['seed']}": r["records"] for r in rows}) + "\n")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(rows, indent=1) + "\n")
+        args.json.write_text(json.dumps([{k: v for k, v in r.items() if k != "records"} for r in rows], indent=1)
+                             + "\n")
     return 0
 
 

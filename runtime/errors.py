@@ -7,7 +7,9 @@ profile or observations file raises :class:`omnijax.config.ConfigError` (or a su
 before anything else, so that either signal, whenever it comes, unwinds the command like an
 exception: staged outputs are removed, child processes are stopped by their context managers,
 and the command exits with 130 and one line saying what was interrupted. The real-time loop
-replaces these handlers while it runs (a signal then ends the loop and everything is written).
+replaces these handlers from when it runs until its outputs are staged: a signal then ends the loop
+and everything is written (exit 0); a second one cuts the writing short but keeps what was recorded
+(exit 130, ``Interrupted.kept``).
 """
 
 from __future__ import annotations
@@ -27,8 +29,9 @@ class UsageError(ValueError):
 
 class Interrupted(KeyboardInterrupt):
     """Ctrl-C or SIGTERM arrived (exit 130). ``during`` says what was going on ("during start-up"),
-    ``unwritten`` the output folder that was not written, ``written`` that the outputs were complete;
-    the code unwinding through it fills them in."""
+    ``unwritten`` the output folder that was not written, ``written`` that the outputs were complete,
+    ``kept`` the output folder that holds what was recorded though writing it was cut short (a real-time
+    run's second signal); the code unwinding through it fills them in."""
 
     def __init__(self, signame: str = "SIGINT"):
         super().__init__(signame)
@@ -36,10 +39,13 @@ class Interrupted(KeyboardInterrupt):
         self.during: str | None = None
         self.unwritten: str | None = None
         self.written = False  # it arrived while outputs were moved into place, which was finished first
+        self.kept: str | None = None
 
     def describe(self) -> str:
         """``interrupted by SIGTERM during start-up; nothing written to DIR``."""
         text = f"interrupted by {self.signame}" + (f" {self.during}" if self.during else "")
+        if self.kept:
+            return text + f"; what was recorded is in {self.kept}, the rest cut short (summary.json finish_cut_short)"
         return text + (f"; nothing written to {self.unwritten}" if self.unwritten else "")
 
 

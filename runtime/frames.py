@@ -2,7 +2,9 @@
 
 :class:`VideoSource`, :class:`FolderSource`, :class:`DeviceSource` and :class:`NetworkSource`
 (``rtsp://``, ``http://`` MJPEG, through OpenCV's FFmpeg, reconnecting when the stream drops)
-are the readers;
+are the readers; :meth:`Source.stamped` gives each frame with the time it arrived at the process
+(live sources: when its bytes were in, before decoding; OpenCV hands over no stream time stamp
+usable as a clock, RTP/RTCP or MJPEG part headers, so arrival is the origin of a frame's age);
 the real-time loop runs them as they are, a broken frame yielded as ``None`` and
 reading going on (:func:`open_source`). :func:`read_frames` is the strict use of the
 same readers for offline commands: an unreadable image or a change of frame size is
@@ -39,6 +41,12 @@ class Source(abc.ABC):
     @abc.abstractmethod
     def frames(self) -> Iterator[np.ndarray | None]:
         """RGB uint8 frames in order; ``None`` for a frame that could not be read."""
+
+    def stamped(self) -> Iterator[tuple[np.ndarray | None, float]]:
+        """:meth:`frames` with the ``time.monotonic()`` each arrived at the process (here: when it was read;
+        live sources stamp it before decoding)."""
+        for img in self.frames():
+            yield img, time.monotonic()
 
     def describe(self, index: int) -> str:
         """Where frame ``index`` comes from, for messages."""
@@ -105,8 +113,38 @@ class FolderSource(Source):
         return str(self.files[index])
 
 
+class _Outages:
+    """A live source's ``counters``: ``drops`` (failed reads), ``outage_s`` (time without frames: from the last
+    frame before a failure to the first after it), and the ``reconnects`` and ``failed_opens`` a source that
+    reopens itself counts."""
+
+    def __init__(self) -> None:
+        self.counters = {"reconnects": 0, "drops": 0, "failed_opens": 0, "outage_s": 0.0}
+        self._last: float | None = None
+        self._down: float | None = None
+
+    def frame(self, t: float) -> None:
+        """A frame arrived at ``t``: an outage under way ends."""
+        if self._down is not None:
+            self.counters["outage_s"] += t - self._down
+            self._down = None
+        self._last = t
+
+    def failed(self, t: float) -> None:
+        """A read failed at ``t``: an outage begins at the last frame (unless one is under way)."""
+        self.counters["drops"] += 1
+        if self._down is None:
+            self._down = t if self._last is None else self._last
+
+    def ended(self, t: float) -> None:
+        """The source ends at ``t`` (given up, or closed) during an outage: it lasted until then."""
+        if self._down is not None:
+            self.frame(t)
+
+
 class DeviceSource(Source):
-    """A camera device by index (OpenCV); a failed grab is yielded as ``None``."""
+    """A camera device by index (OpenCV); a failed grab is yielded as ``None``, counted in ``counters``
+    (``drops``, ``outage_s``) as a network stream's are."""
 
     def __init__(self, index: int, max_broken: int = 50):
         self._cap = cv2.VideoCapture(index)
@@ -116,17 +154,28 @@ class DeviceSource(Source):
         self.fps = fps if fps and fps > 0 else None
         self.name, self.max_broken = f"camera {index}", max_broken
         self.live = True
+        self._outages = _Outages()
+        self.counters = self._outages.counters
 
     def frames(self):
+        for img, _ in self.stamped():
+            yield img
+
+    def stamped(self):
         broken = 0
         while broken < self.max_broken:
-            ok, img = self._cap.read()
+            ok = self._cap.grab()
+            t = time.monotonic()  # the frame is in: its arrival, before it is decoded
+            ok, img = self._cap.retrieve() if ok else (False, None)
             if ok and img is not None:
                 broken = 0
-                yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+                self._outages.frame(t)
+                yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB), t
             else:
                 broken += 1
-                yield None
+                self._outages.failed(t)
+                yield None, t
+        self._outages.ended(time.monotonic())
 
     def close(self):
         self._cap.release()
@@ -141,17 +190,19 @@ class NetworkSource(Source):
 
     When the stream drops (a read fails or times out), the source yields ``None`` (one broken
     frame), then reopens it with exponential back-off (``backoff_s``: first and longest delay)
-    and goes on, counting ``reconnects`` and the ``outage_s`` spent without frames; the stream
-    ends only after ``give_up_s`` without a frame, or on :meth:`close`. Frames are stamped with
-    the capture clock (``live``). The first open failing is a :class:`SourceError`.
+    and goes on, counting ``reconnects`` and the ``outage_s`` without frames (from the last frame
+    before the drop to the first after it); the stream ends only after ``give_up_s`` without a
+    frame, or on :meth:`close`. Frames are stamped with their arrival (``live``). The first open
+    failing is a :class:`SourceError`.
     """
 
     def __init__(self, url: str, open_timeout_s: float = 5.0, read_timeout_s: float = 2.0,
-                 backoff_s: tuple[float, float] = (0.1, 2.0), give_up_s: float = 60.0):
+                 backoff_s: tuple[float, float] = (0.1, 1.0), give_up_s: float = 60.0):
         self.url, self.name, self.live = url, url, True
         self.open_timeout_s, self.read_timeout_s = open_timeout_s, read_timeout_s
         self.backoff_s, self.give_up_s = backoff_s, give_up_s
-        self.counters = {"reconnects": 0, "drops": 0, "failed_opens": 0, "outage_s": 0.0}
+        self._outages = _Outages()
+        self.counters = self._outages.counters
         self._closed = threading.Event()
         self._reading = False
         self._cap = self._open()
@@ -171,18 +222,26 @@ class NetworkSource(Source):
         return None
 
     def frames(self):
+        for img, _ in self.stamped():
+            yield img
+
+    def stamped(self):
         self._reading = True
         try:
             while not self._closed.is_set():
-                ok, img = self._cap.read() if self._cap is not None else (False, None)
+                ok = self._cap.grab() if self._cap is not None else False
+                t = time.monotonic()  # the frame's bytes are in: its arrival, before it is decoded
+                ok, img = self._cap.retrieve() if ok else (False, None)
                 if ok and img is not None:
-                    yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+                    self._outages.frame(t)
+                    yield cv2.cvtColor(img, cv2.COLOR_BGR2RGB), t
                     continue
                 if self._closed.is_set():
                     return
-                self.counters["drops"] += 1
-                yield None
+                self._outages.failed(t)
+                yield None, t
                 if not self._reconnect():
+                    self._outages.ended(time.monotonic())
                     return
         finally:
             self._reading = False
@@ -197,19 +256,16 @@ class NetworkSource(Source):
             self._cap = None
         t0 = time.monotonic()
         delay = self.backoff_s[0]
-        try:
-            while not self._closed.wait(delay):
-                self._cap = self._open()
-                if self._cap is not None:
-                    self.counters["reconnects"] += 1
-                    return True
-                self.counters["failed_opens"] += 1
-                if time.monotonic() - t0 > self.give_up_s:
-                    return False
-                delay = min(2 * delay, self.backoff_s[1])
-            return False
-        finally:
-            self.counters["outage_s"] += time.monotonic() - t0
+        while not self._closed.wait(delay):
+            self._cap = self._open()
+            if self._cap is not None:
+                self.counters["reconnects"] += 1
+                return True
+            self.counters["failed_opens"] += 1
+            if time.monotonic() - t0 > self.give_up_s:
+                return False
+            delay = min(2 * delay, self.backoff_s[1])
+        return False
 
     def close(self):
         """Stop reading; the capture is released here, or by the reading thread when it notices."""

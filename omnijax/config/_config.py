@@ -179,9 +179,13 @@ class Room(eqx.Module):
     outline: Float[Array, "n 2"]
     exclude: tuple[Float[Array, "m 2"], ...]
 
+    def inside_outline(self, X, Y) -> Array:
+        """Whether floor points (X, Y) lie inside the outline (where a person can be)."""
+        return _in_polygon(self.outline, X, Y)
+
     def contains(self, X, Y) -> Array:
         """Whether floor points (X, Y) lie inside the outline and outside every excluded zone."""
-        inside = _in_polygon(self.outline, X, Y)
+        inside = self.inside_outline(X, Y)
         for zone in self.exclude:
             inside = inside & ~_in_polygon(zone, X, Y)
         return inside

@@ -18,8 +18,12 @@ call per frame (:func:`live_step`), after detection, with the frame's d^2 (the d
    stronger before); the others when there is no edge now (``edge_now < edge``), which also covers
    a lamp of another colour switching on a bare floor.
 2. **Repair**: a sample that has changed, stayed unchanged from frame to frame (still) for
-   ``still_frames`` and lain in a ghost's region for ``ghost_frames`` is re-learnt from the current
-   frame (its variance factor 1: one frame's estimate).
+   ``still_frames`` and gathered ``ghost_frames`` votes of a ghost is re-learnt from the current frame
+   (its variance factor 1: one frame's estimate). The votes are counted while the sample stays
+   changed: +1 for each frame it lies in a ghost's region, -1 for each frame it lies in a person's
+   (a detection judged no ghost), none while no detection claims it; a ghost's evidence flickers
+   about the threshold from frame to frame, and a run of ghost frames would be broken by each
+   flicker.
 3. **Absorption**: a sample that has changed and stayed still for ``absorb_frames`` outside the
    region of every trusted person is learnt as it is now (a chair moved and left, a coat dropped).
    A person who stops is in a trusted person's region and is never absorbed.
@@ -56,7 +60,7 @@ class Life(eqx.Module):
     """The background at the polar samples and what its life keeps per sample: ``seen`` (frames its
     colour was learnt from, capped), ``prev`` (the last frame's colour), ``still`` (frames it has been
     changed and unchanged from frame to frame), ``ghost`` (frames it has lain, changed, in a ghost's
-    region)."""
+    region, net of the frames in a person's: the ghost votes)."""
 
     lines: LineBackground
     seen: Float[Array, "T R"]
@@ -176,7 +180,10 @@ def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets
     occupied = regions(dets, valid, shape)
     static = change_measure(cur, life.prev, 1.0, lines.sigma) < CHANGED
     still = jnp.where(changed & static, life.still + 1.0, 0.0)
-    ghost = jnp.where(changed & in_ghost & ~people, life.ghost + 1.0, 0.0)
+    # a vote, not a run: +1 in a ghost's region, -1 in a person's, held where the sample changed and
+    # nobody claims it; the evidence of one ghost flickers about the edge threshold from frame to frame
+    vote = jnp.where(in_ghost & ~people, 1.0, jnp.where(people, -1.0, 0.0))
+    ghost = jnp.where(changed, jnp.maximum(life.ghost + vote, 0.0), 0.0)
     repair = changed & (ghost >= rates.ghost_frames) & (still >= rates.still_frames)
     absorb = changed & (still >= rates.absorb_frames) & ~protected
     fix = (repair | absorb) & ok

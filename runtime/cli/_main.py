@@ -1,15 +1,19 @@
 """The ``omnijax`` command line: one subcommand per job, each a module of ``runtime/cli/``.
 
-Exit codes: 0 success, 2 bad input (one line on stderr naming what was wrong and
-what was expected), 130 interrupted (Ctrl-C or SIGTERM, at any moment; one line).
+Exit codes: 0 success (a real-time run stopped by Ctrl-C or SIGTERM included), 2 bad
+input (one line on stderr naming what was wrong and what was expected), 130 interrupted
+(Ctrl-C or SIGTERM; one line), 141 the reader of stdout went away (quietly).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import logging
 import os
 import sys
+from collections.abc import Iterator
 
 from runtime.errors import Interrupted, UsageError, interrupt_handlers
 
@@ -29,7 +33,10 @@ Rig files are TOML (see configs/paper.toml for every key, with units).
 
 Exit codes: 0 done; 2 bad input (a config, file, flag or port), with one line on
 stderr naming what was wrong, found before any work and leaving nothing behind;
-130 interrupted (Ctrl-C or SIGTERM, at any moment; nothing half-written).
+130 interrupted (Ctrl-C or SIGTERM, at any moment; nothing half-written), except
+that a running `run` or `demo` is stopped by them: the PTZ goes home, everything
+is written, exit 0 (a second one while it writes keeps what was recorded, 130);
+141 the reader of stdout went away (omnijax ... | head -1: ends quietly).
 """
 
 
@@ -54,6 +61,40 @@ def _is_input_error(exc: Exception) -> bool:
     """UsageError or omnijax.ConfigError; omnijax (and jax) is not imported for commands that never load it."""
     config = sys.modules.get("omnijax.config")
     return isinstance(exc, UsageError) or (config is not None and isinstance(exc, config.ConfigError))
+
+
+class _Lines(logging.Handler):
+    """Log records as one line like the command's other messages, ``omnijax run: warning: ...``, on stderr."""
+
+    def __init__(self, command: str) -> None:
+        super().__init__(logging.WARNING)
+        self.command = command
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            sys.stderr.write(f"{self.command}: {record.levelname.lower()}: {record.getMessage()}\n")
+        except Exception:
+            self.handleError(record)
+
+
+@contextlib.contextmanager
+def log_lines(command: str) -> Iterator[None]:
+    """Warnings of omnijax and of the libraries under it are printed as ``COMMAND: warning: ...`` while the
+    block runs: the root logger gets this handler (where nothing else configured it, i.e. not under a host
+    such as pytest), so that a library's own ``logging.basicConfig`` (onvif-zeep-async calls it on import)
+    adds no raw ``WARNING:name:`` handler."""
+    root = logging.getLogger()
+    if root.handlers:
+        yield
+        return
+    handler, level = _Lines(command), root.level
+    root.addHandler(handler)
+    root.setLevel(logging.WARNING)
+    try:
+        yield
+    finally:
+        root.removeHandler(handler)
+        root.setLevel(level)
 
 
 def enable_float64() -> None:
@@ -88,28 +129,42 @@ def main(argv: list[str] | None = None) -> int:
                 from runtime.output import check_output
 
                 check_output(args.out)
-            return int(args.func(args) or 0)
+            with log_lines(command):
+                return int(args.func(args) or 0)
         except Exception as exc:
             if not _is_input_error(exc):
                 raise
             print(f"{command}: error: {exc}", file=sys.stderr)
             return 2
         except KeyboardInterrupt as exc:
-            if isinstance(exc, Interrupted) and exc.unwritten is None and not exc.written and args is not None:
+            if (isinstance(exc, Interrupted) and exc.unwritten is None and not exc.written and exc.kept is None
+                    and args is not None):
                 exc.unwritten = getattr(args, "out", None)  # interrupted before its outputs were staged
             what = exc.describe() if isinstance(exc, Interrupted) else "interrupted"
             print(f"{command}: {what}", file=sys.stderr)
             return 130
 
 
+#: Exit code when the reader of stdout went away (a closed pipe): 128 + SIGPIPE, as the shell reports it.
+EXIT_PIPE = 141
+
+
 def console() -> None:
     """The ``omnijax`` executable (and ``python -m runtime.cli``): :func:`main`, then exit with its code.
+
+    A reader that goes away (``omnijax variance ... --json | head -1``) ends the command quietly, with
+    :data:`EXIT_PIPE` and no traceback.
 
     After Ctrl-C or SIGTERM (exit code 130) the process ends at once, once :func:`main` has cleaned
     up (staged outputs removed, child processes stopped): JAX may still be compiling on its own
     threads, and the interpreter's normal shutdown underneath them can crash (SIGSEGV).
     """
-    code = main()
+    try:
+        code = main()
+        sys.stdout.flush()
+    except BrokenPipeError:  # the reader went away (omnijax ... | head -1): end quietly, as SIGPIPE would
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # nothing left for the exit's flush
+        code = EXIT_PIPE
     if code == 130:
         sys.stdout.flush()
         sys.stderr.flush()

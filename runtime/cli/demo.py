@@ -56,7 +56,9 @@ start, and only requests with that token change anything.
 
 Ctrl-C or SIGTERM during start-up (building the world, learning the background,
 compiling: 20-30 s) stops it at once: nothing is written, the emulator is stopped,
-exit code 130. Once the loop runs, they end it and everything is written.
+exit code 130. Once the loop runs, they end it and everything is written (exit 0);
+a second one while the outputs are written cuts that short and keeps what was
+recorded (exit 130).
 
 --faults injects faults while running, e.g.
   broken@300,wrong-size@350,ptz-unplug@400:2,end@900
@@ -246,6 +248,8 @@ def run(args: argparse.Namespace) -> int:
 def _report(s: dict, out) -> None:
     import numpy as np
 
+    from runtime.realtime.session import home_warning
+
     c, f, d = s["containment"], s["face_px"], s["detection"]
     lat = s["latency_ms"]
     print(f"{s['frames']} frames at {s['fps']:.1f} fps ({s['stop_reason']}); latency frame -> PTZ bytes "
@@ -276,4 +280,6 @@ def _report(s: dict, out) -> None:
                   f"{cam['handed_over']} given")
     o = s["outputs"]
     written = ["summary.json", "log.jsonl", *(o[k] for k in ("video", "record", "view") if k in o)]
-    print(f"demo outputs: {out}/ ({', '.join(written)})")
+    print(f"demo outputs: {out}/ ({', '.join(written)})", flush=True)
+    if (warning := home_warning(s)) is not None:
+        print(f"omnijax demo: {warning}", file=sys.stderr, flush=True)

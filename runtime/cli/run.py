@@ -13,10 +13,13 @@ HELP = ("track people with the omni camera (device, stream, video or image folde
 DESCRIPTION = """\
 SOURCE is a camera index (0, 1, ...), a network stream (rtsp://..., http://... MJPEG,
 read through OpenCV's FFmpeg; when it drops, it is reopened with back-off, 0.1 s
-doubling to 2 s, for up to 60 s, and the reconnects are counted in summary.json
-stream {reconnects, drops, failed_opens, outage_s}), a video file or a folder of
-images. A capture thread keeps only the newest frame (late frames are dropped and
-counted). The
+doubling to 1 s, for up to 60 s, and the reconnects are counted in summary.json
+stream {reconnects, drops, failed_opens, outage_s: the time without frames}), a video
+file or a folder of images. A capture thread keeps only the newest frame (late frames
+are dropped and counted); a camera or a stream is drained from the moment it is opened,
+also while the loop starts up, so that the loop always acts on the newest frame, never
+on a backlog: summary.json frame_age_ms {p50, p99} (from a frame's arrival to its PTZ
+bytes) and log.jsonl wait_ms, age_ms per frame show it. The
 background is learnt from frames spread over the first seconds (--background-frames over
 --background-seconds: people standing through less than half of them are not learnt) and
 keeps itself right while running (ghosts of people who left are re-learnt, what stays
@@ -39,7 +42,11 @@ assigned to the PTZs exactly (face size and containment probability per PTZ
 and person, slew time, how long each person has gone uncaptured; hysteresis;
 hand-offs; a spare PTZ gives the weakest-framed person a second view:
 docs/site.md).
-Ctrl-C or SIGTERM: the PTZs go home, the summary is written, nothing is lost.
+Ctrl-C or SIGTERM once the loop runs: the loop ends, the PTZs go home and everything is
+written (exit 0; the last line says so if a PTZ did not report its home position). A
+second one while the outputs are written cuts that short (no more drawing, no wait for
+the PTZs) and keeps what was recorded: summary.json and log.jsonl (written line by line)
+are in DIR (exit 130). During the start-up they interrupt at once: nothing written (130).
 
 Writes DIR/summary.json (docs/design.md section 7.3), DIR/log.jsonl (one line per frame),
 DIR/events.jsonl (person appeared, face captured, left; faces in DIR/faces/ with
@@ -120,14 +127,25 @@ def run(args: argparse.Namespace) -> int:
             source = FaultySource(source, plan)
         pace = args.pace or ("all" if isinstance(source, FolderSource) and args.fps is None else "live")
         summary = _run(args, rig, source, profiles, config, plan, pace, console, mqtt)
-    lat, p = summary["latency_ms"], summary["ptz"]
+    report(summary, args.out)
+    return 0
+
+
+def report(summary: dict, out) -> None:
+    """What ``run`` prints at the end: one line on stdout; when the PTZ did not get home, a last line on stderr
+    that says so."""
+    from runtime.realtime.session import home_warning
+
+    lat, age, p = summary["latency_ms"], summary["frame_age_ms"], summary["ptz"]
+    nan = float("nan")
     print(f"{summary['frames']} frames at {summary['fps']:.1f} fps ({summary['stop_reason']}); latency p50 "
-          f"{lat['p50'] or float('nan'):.2f} ms, p99 {lat['p99'] or float('nan'):.2f} ms; "
-          f"PTZ {p['commands']} commands, "
+          f"{lat['p50'] or nan:.2f} ms, p99 {lat['p99'] or nan:.2f} ms; frame age p50 {age['p50'] or nan:.2f} ms, "
+          f"p99 {age['p99'] or nan:.2f} ms; PTZ {p['commands']} commands, "
           f"{p['errors']} errors, {p['reconnects']} reconnects; "
           + (f"stream {summary['stream']['reconnects']} reconnects; " if "stream" in summary else "")
-          + f"wrote {args.out}", file=sys.stdout)
-    return 0
+          + f"wrote {out}", file=sys.stdout, flush=True)
+    if (warning := home_warning(summary)) is not None:
+        print(f"omnijax run: {warning}", file=sys.stderr, flush=True)
 
 
 def ptz_profile(args, rig, k: int, protocol: str | None):

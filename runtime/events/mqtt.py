@@ -7,7 +7,9 @@ set-ups use; docs/console.md says why).
 broker's last will, when the connection is lost). The client runs its own network thread and
 reconnects by itself; publishing never waits, so neither the drawing thread nor the loop is held up
 by a slow or absent broker (messages wait in the client's queue meanwhile, at most
-:data:`MAX_QUEUED`).
+:data:`MAX_QUEUED`). Events published while the client is (re)connecting may reach the broker out
+of order (the client resends its queue on connecting while new events go straight out): order
+by an event's ``frame`` or ``time``, which only grow.
 """
 
 from __future__ import annotations

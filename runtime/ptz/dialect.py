@@ -93,7 +93,7 @@ class ViscaDialect:
 
     def commands(self, t: DeviceTarget) -> list[tuple[str, tuple[int, ...], Exchange]]:
         p, a = self.profile, self.address
-        pt = visca.pan_tilt_absolute(a, p.pan.speed, p.tilt.speed, t.pan, t.tilt)
+        pt = visca.pan_tilt_absolute(a, p.pan.speed, p.tilt.speed, t.pan, t.tilt)  # at AxisSection.move_deg_s
         zoom = visca.zoom_direct(a, t.zoom)
         return [("pan_tilt", (t.pan, t.tilt), Exchange(pt, "pan_tilt", _is("ack", "error"))),
                 ("zoom", (t.zoom,), Exchange(zoom, "zoom", _is("ack", "error")))]

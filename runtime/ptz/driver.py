@@ -23,7 +23,9 @@ port is closed and reopened with exponential back-off
 IF_Clear, also after a Network Change message), and the latest target is sent.
 
 Ports are pyserial URLs: ``/dev/ttyUSB0``, ``socket://host:port``, ``loop://``,
-or a pseudo-terminal from ``omnijax ptz-emulator``.
+or a pseudo-terminal from ``omnijax ptz-emulator`` (and ``visca-udp://``, through
+:class:`~runtime.ptz.visca_ip.ViscaIpPort`). What every driver shares (the target,
+connect/disconnect, queries, counters) is :class:`~runtime.ptz.base.DriverBase`'s.
 """
 
 from __future__ import annotations
@@ -31,17 +33,16 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import deque
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 
-import numpy as np
 import serial
 
 from . import transports
+from .base import DriverBase
 from .dialect import Event, Exchange, dialect_for
 from .errors import PtzError as PtzError, PtzPortError as PtzPortError
-from .profile import DeviceProfile, DeviceTarget, PtzPosition
+from .profile import DeviceProfile
 
 log = logging.getLogger("omnijax.ptz")
 
@@ -51,8 +52,6 @@ _READ_TIMEOUT_S = 0.05
 _WRITE_TIMEOUT_S = 1.0
 #: The worker's longest sleep when idle (s).
 _IDLE_S = 0.1
-#: Write-to-answer latencies kept for the statistics.
-_LATENCIES_KEPT = 10_000
 
 
 class _LinkLost(Exception):
@@ -84,130 +83,36 @@ class _Connection:
         self.closing = threading.Event()
 
 
-class PtzDriver:
-    """Steers one PTZ camera; see the module docstring. Thread-safe; ``set_target`` never blocks on I/O."""
+class PtzDriver(DriverBase):
+    """Steers one PTZ camera over a byte stream; see the module docstring and :class:`DriverBase`."""
+
+    COUNTERS = ("acks", "completions", "timeouts", "buffer_full", "unsolicited", "garbage_bytes")
+    LATENCIES = ("ack", "query")
 
     def __init__(self, port: str, profile: DeviceProfile) -> None:
-        self.port = port
-        self.profile = profile
-        self._link = profile.link
+        super().__init__(port, profile)
         self._dialect = dialect_for(profile)
-        self._cond = threading.Condition()
-        self._stop = threading.Event()
-        self._connected = threading.Event()
-        self._worker: threading.Thread | None = None
         self._conn: _Connection | None = None
         self._lost_reason: str | None = None
-        self._target: DeviceTarget | None = None
-        self._seq = 0
         self._sent: dict[str, tuple[int, ...]] = {}
-        self._sent_seq = 0
         self._pending: dict[int, _Pending] = {}
         self._waiting: _Waiter | None = None
-        self._queries: deque[Future] = deque()
         self._reinit = False
         self._silent = 0
         self._next_send = 0.0
-        self._clamped: tuple[str, ...] = ()
-        self._ever_connected = False
-        self._outage_since: float | None = None
-        self.last_error: str | None = None
-        self._counts = dict.fromkeys(
-            ("commands", "errors", "reconnects", "acks", "completions", "timeouts", "buffer_full",
-             "clamped", "superseded", "unsolicited", "garbage_bytes"), 0)
-        self._latency = {"ack": deque(maxlen=_LATENCIES_KEPT), "query": deque(maxlen=_LATENCIES_KEPT)}
-        self._writes: deque[tuple[int, float]] = deque(maxlen=_LATENCIES_KEPT)
         #: what the transport counts (VISCA over IP: retries, sequence errors, stale and malformed datagrams)
         self._transport: dict[str, int] = {}
 
-    # ------------------------------------------------------------------------------------
-    # Public API
-    # ------------------------------------------------------------------------------------
-
-    def connect(self, timeout: float | None = 5.0) -> PtzDriver:
-        """Start the worker; wait up to ``timeout`` s for the camera (``None``: do not wait).
-
-        Raises :class:`PtzPortError` if the URL is malformed or names a device that does not
-        exist, :class:`PtzError` if no initialised connection was made in time (the driver is
-        then stopped again).
-        """
-        if self._worker is not None:
-            return self
+    def _check(self) -> None:
         transports.check_port(self.port)
-        self._stop.clear()
-        self._worker = threading.Thread(target=self._run, name="ptz-worker", daemon=True)
-        self._worker.start()
-        if timeout is not None and not self._connected.wait(timeout):
-            reason = self.last_error or "no answer"
-            self.disconnect()
-            raise PtzError(f"{self.port}: no {self.profile.protocol} camera within {timeout:g} s ({reason})")
-        return self
 
-    def disconnect(self) -> None:
-        """Stop the worker and close the port; pending queries fail with :class:`PtzError`."""
-        self._stop.set()
-        with self._cond:
-            if self._waiting is not None:
-                self._waiting.event.set()
-            self._cond.notify_all()
-        if self._worker is not None:
-            self._worker.join()
-            self._worker = None
+    def _wake(self) -> None:
+        if self._stop.is_set() and self._waiting is not None:  # a stop: end the exchange waiting for its answer
+            self._waiting.event.set()
+        self._cond.notify_all()
 
-    def __enter__(self) -> PtzDriver:
-        return self.connect()
-
-    def __exit__(self, *exc) -> None:
-        self.disconnect()
-
-    @property
-    def connected(self) -> bool:
-        """Whether the port is open and the camera initialised."""
-        return self._connected.is_set()
-
-    def set_target(self, pan: float, tilt: float, zoom: float) -> DeviceTarget:
-        """Aim at omnijax ``pan``, ``tilt`` (rad) with zoom factor ``zoom``; returns at once.
-
-        Returns the target in device units as it will be sent (clamped to the
-        limits; clamping is logged when it starts and stops). A non-finite value
-        is a ``ValueError``.
-        """
-        t = self.profile.to_device(pan, tilt, zoom)
-        if t.clamped != self._clamped:
-            if t.clamped:
-                log.warning("PTZ target clamped to the device's limits on %s (pan %.2f deg, tilt %.2f deg, "
-                            "zoom %.2fx requested)", ", ".join(t.clamped), np.degrees(pan), np.degrees(tilt), zoom)
-            else:
-                log.info("PTZ target back within the device's limits")
-            self._clamped = t.clamped
-        with self._cond:
-            if t.clamped:
-                self._counts["clamped"] += 1
-            if self._target is not None and self._sent_seq < self._seq:
-                self._counts["superseded"] += 1
-            self._target = t
-            self._seq += 1
-            self._cond.notify_all()
-        return t
-
-    @property
-    def target(self) -> DeviceTarget | None:
-        """The latest target, in device units."""
-        return self._target
-
-    @property
-    def sequence(self) -> int:
-        """The number of :meth:`set_target` calls so far: the latest target's sequence number."""
-        with self._cond:
-            return self._seq
-
-    def take_writes(self) -> list[tuple[int, float]]:
-        """(sequence number, ``time.monotonic()``) of each target packet written since the last call:
-        when the port accepted its bytes (for frame-to-wire latency)."""
-        with self._cond:
-            out = list(self._writes)
-            self._writes.clear()
-        return out
+    def _extra_stats(self) -> dict:
+        return {"transport": dict(self._transport)}
 
     def capabilities(self) -> transports.Capabilities:
         """What this camera offers, from its protocol and profile (``omnijax ptz probe`` checks them live)."""
@@ -223,63 +128,6 @@ class PtzDriver:
             limits_deg={"pan": tuple(p.pan.limits_deg), "tilt": tuple(p.tilt.limits_deg)},
             notes=() if visca or p.pelco_d.general_response else ("no general response: writes are not acknowledged",),
         )
-
-    def request_position(self) -> Future:
-        """Ask the camera where it is; the future gives a :class:`PtzPosition` (or raises :class:`PtzError`)."""
-        fut: Future = Future()
-        with self._cond:
-            if not self.connected:
-                fut.set_exception(PtzError(f"{self.port}: not connected"))
-            else:
-                self._queries.append(fut)
-                self._cond.notify_all()
-        return fut
-
-    def query_position(self, timeout: float = 2.0) -> PtzPosition:
-        """Blocking :meth:`request_position` (not for the real-time loop)."""
-        return self.request_position().result(timeout)
-
-    def reached(self, tolerance: int = 1) -> bool:
-        """Whether the camera reports the latest target, within ``tolerance`` device units per axis."""
-        t = self._target
-        if t is None:
-            return True
-        try:
-            pos = self.query_position()
-        except (PtzError, TimeoutError):
-            return False
-        return all(self.profile.units_apart(axis, a, b) <= tolerance
-                   for axis, a, b in zip(("pan", "tilt", "zoom"), pos.units, (t.pan, t.tilt, t.zoom)))
-
-    def wait_reached(self, timeout: float, tolerance: int = 1, poll_s: float = 0.05) -> bool:
-        """Poll :meth:`reached` until it holds or ``timeout`` s pass (for installers and tests)."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.connected and self.reached(tolerance):
-                return True
-            time.sleep(poll_s)
-        return False
-
-    @property
-    def counters(self) -> dict[str, int]:
-        """``commands`` written, ``errors`` (error replies, time-outs, failed writes), ``reconnects``."""
-        with self._cond:
-            return {k: self._counts[k] for k in ("commands", "errors", "reconnects")}
-
-    def stats(self) -> dict:
-        """All counters, and write-to-answer latencies (ms): ``ack`` for commands, ``query`` for inquiries."""
-        with self._cond:
-            out: dict = dict(self._counts)
-            lat = {k: list(v) for k, v in self._latency.items()}
-            out["transport"] = dict(self._transport)
-        lat = {k: 1e3 * np.asarray(v) for k, v in lat.items()}
-        out["connected"] = self.connected
-        out["latency_ms"] = {
-            k: ({"p50": float(np.median(v)), "p99": float(np.percentile(v, 99)), "n": int(v.size)}
-                if v.size else {"n": 0})
-            for k, v in lat.items()
-        }
-        return out
 
     # ------------------------------------------------------------------------------------
     # Worker: connection life cycle
@@ -306,16 +154,9 @@ class PtzDriver:
             self._fail_queries(f"{self.port}: driver stopped")
 
     def _fail(self, reason: str) -> None:
-        """Close a failed link; the first failure of an outage is an error and a warning, the rest debug."""
-        self.last_error = reason
-        first = self._outage_since is None
-        if first:
-            self._outage_since = time.monotonic()
-            with self._cond:
-                self._counts["errors"] += 1
-        (log.warning if first else log.debug)("PTZ link lost on %s: %s; reopening", self.port, reason)
+        """Close a failed link (counted and said once per outage: :meth:`DriverBase._link_lost`)."""
         self._close()
-        self._fail_queries(f"{self.port}: {reason}")
+        self._link_lost(reason)
 
     def _open(self) -> bool:
         try:
@@ -339,17 +180,12 @@ class PtzDriver:
                 self._fail(f"initialisation failed: {exc}")
             return False
         with self._cond:
-            if self._ever_connected:
-                self._counts["reconnects"] += 1
-            self._ever_connected = True
             self._sent.clear()
             self._pending.clear()
             self._silent = 0
-            self._connected.set()
-            self._cond.notify_all()
-        outage, self._outage_since = self._outage_since, None
+        after = self._link_up()
         log.info("PTZ connected on %s (%s, address %d)%s", self.port, self.profile.protocol, self.profile.address,
-                 "" if outage is None else f" after {time.monotonic() - outage:.2f} s without")
+                 after)
         return True
 
     def _initialise(self) -> None:
@@ -375,12 +211,6 @@ class PtzDriver:
             pass
         with self._cond:
             self._pending.clear()
-
-    def _fail_queries(self, reason: str) -> None:
-        with self._cond:
-            queries, self._queries = list(self._queries), deque()
-        for fut in queries:
-            fut.set_exception(PtzError(reason))
 
     # ------------------------------------------------------------------------------------
     # Worker: sending

@@ -6,8 +6,9 @@ Use::
         ptz.set_target(pan, tilt, zoom)      # every frame; returns at once
         print(ptz.counters)                  # {"commands", "errors", "reconnects"}
 
-The same interface and rules as :class:`runtime.ptz.driver.PtzDriver` (latest target wins,
-nothing queues up, one worker owns the link, reconnect with exponential back-off, counters),
+The same interface and rules as :class:`runtime.ptz.driver.PtzDriver`, from the same base
+(:class:`runtime.ptz.base.DriverBase`: latest target wins, nothing queues up, one worker owns
+the link, reconnect with exponential back-off, counters),
 over the ONVIF client library ``onvif-zeep-async`` (docs/ptz.md says why that one). The
 worker runs its own asyncio loop in a thread; ``set_target`` only stores the target.
 
@@ -44,17 +45,14 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-import threading
 import time
-from collections import deque
 from concurrent.futures import Future
 from dataclasses import dataclass
 from urllib.parse import unquote, urlsplit
 
-import numpy as np
-
-from .driver import PtzError, PtzPortError
-from .profile import DeviceProfile, DeviceTarget, PtzPosition
+from .base import DriverBase
+from .errors import PtzError, PtzPortError
+from .profile import DeviceProfile, DeviceTarget
 
 log = logging.getLogger("omnijax.ptz")
 
@@ -67,7 +65,6 @@ _CONTINUOUS_TAU_S = 0.15
 _CONTINUOUS_TIMEOUT_S = 1.0
 #: A move's status is polled at this interval (s) at most (``link.retry_delay_s`` when larger).
 _IDLE_S = 0.1
-_LATENCIES_KEPT = 10_000
 _AXES = ("pan", "tilt", "zoom")
 
 
@@ -77,6 +74,60 @@ class _LinkLost(Exception):
 
 class _Unauthorised(_LinkLost):
     """Internal: the camera refused the credentials."""
+
+
+class _NotOnvif(_LinkLost):
+    """Internal: what answered discovery is no ONVIF PTZ camera (no SOAP reply, no PTZ service)."""
+
+
+class _BadReply(Exception):
+    """Internal: what came back is no SOAP reply (the message says what it was)."""
+
+
+#: Longest reply read (bytes): ONVIF replies are a few kB; the rest of a longer one is not read.
+MAX_REPLY_BYTES = 1 << 20
+
+
+def describe_reply(status: int, content_type: str, body: bytes) -> str | None:
+    """Why an HTTP reply (``status``, its ``Content-Type``, its ``body``) is no SOAP reply, in a few words
+    naming what came back (``None``: it may be one: XML, and a SOAP envelope where the status is an error)."""
+    head = body.lstrip()[:60].decode("utf-8", "replace")
+    what = f"HTTP {status} ({content_type or 'no content type'}, {len(body)} bytes: {head!r})"
+    if not body.lstrip().startswith(b"<"):
+        return f"{what}: not XML"
+    if status >= 400 and b"Envelope" not in body:  # a SOAP fault comes with an error status: not this
+        return what
+    return None
+
+
+def _capped(transport) -> None:
+    """Make ``transport`` (onvif-zeep-async's aiohttp transport of one service) read at most
+    :data:`MAX_REPLY_BYTES` of a reply and raise :class:`_BadReply` for one that is no SOAP reply, before
+    zeep parses it (zeep's errors for those say nothing of what came back). Replaces the transport's
+    ``_post_internal`` (onvif-zeep-async 4.3, pinned) on this instance."""
+    session = transport.session
+
+    async def post_internal(address, message, headers):
+        headers = {"Content-Type": 'text/xml; charset="utf-8"', **(headers or {})}
+        data = message.encode("utf-8") if isinstance(message, str) else message
+        response = await session.post(address, data=data, headers=headers, proxy=transport.proxy)
+        try:
+            chunks, size = [], 0
+            async for chunk in response.content.iter_any():
+                size += len(chunk)
+                if size > MAX_REPLY_BYTES:
+                    raise _BadReply(f"HTTP {response.status} ({response.content_type}): a reply of more than "
+                                    f"{MAX_REPLY_BYTES >> 10} KiB, not read further")
+                chunks.append(chunk)
+        finally:
+            response.release()
+        body = b"".join(chunks)
+        why = describe_reply(response.status, response.content_type, body)
+        if why is not None:
+            raise _BadReply(why)
+        return response, body
+
+    transport._post_internal = post_internal
 
 
 @dataclass
@@ -132,37 +183,24 @@ class _EgressClock:
         return envelope, http_headers
 
 
-class OnvifDriver:
-    """Steers one ONVIF PTZ camera; see the module docstring. Thread-safe; ``set_target`` never blocks."""
+class OnvifDriver(DriverBase):
+    """Steers one ONVIF PTZ camera; see the module docstring and :class:`DriverBase`."""
+
+    COUNTERS = ("moves", "status_polls", "faults", "timeouts", "malformed", "unauthorised", "corrections",
+                "timer_fallbacks")
+    LATENCIES = ("move", "query")
+    WORKER = "ptz-onvif"
 
     def __init__(self, port: str, profile: DeviceProfile) -> None:
+        super().__init__(redact(port), profile)  # what messages show: never the password
         self._raw_url = port
-        self.port = redact(port)  # what messages show: never the password
-        self.profile = profile
-        self._link = profile.link
         self._url: OnvifUrl | None = None
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._connected = threading.Event()
-        self._worker: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._wake: asyncio.Event | None = None
-        self._target: DeviceTarget | None = None
-        self._seq = 0
-        self._sent_seq = 0
-        self._queries: deque[Future] = deque()
-        self._clamped: tuple[str, ...] = ()
-        self._ever_connected = False
-        self._outage_since: float | None = None
+        self._wakeup: asyncio.Event | None = None
         self._unauthorised = False
-        self.last_error: str | None = None
+        self._not_onvif = False
         #: what discovery found: profile token, move modes, whether position and move status are reported
         self.discovered: dict = {}
-        self._counts = dict.fromkeys(
-            ("commands", "errors", "reconnects", "moves", "status_polls", "faults", "timeouts", "malformed",
-             "unauthorised", "clamped", "superseded", "corrections", "timer_fallbacks"), 0)
-        self._latency = {"move": deque(maxlen=_LATENCIES_KEPT), "query": deque(maxlen=_LATENCIES_KEPT)}
-        self._writes: deque[tuple[int, float]] = deque(maxlen=_LATENCIES_KEPT)
         # motion book-keeping (worker only): the goal in device units, the estimate, the move's deadline
         self._goal: tuple[float, float, float] | None = None
         self._estimate: list[float] = [0.0, 0.0, float(profile.zoom.position[0])]
@@ -177,92 +215,33 @@ class OnvifDriver:
         self._egress = _EgressClock()
 
     # ------------------------------------------------------------------------------------
-    # Public API (as PtzDriver's)
+    # What DriverBase asks of a driver
     # ------------------------------------------------------------------------------------
 
-    def connect(self, timeout: float | None = 5.0) -> OnvifDriver:
-        """Start the worker; wait up to ``timeout`` s for the camera (``None``: do not wait).
-
-        :class:`PtzPortError` for a malformed URL or refused credentials, :class:`PtzError` if no
-        camera was discovered in time (the driver is then stopped again).
-        """
-        if self._worker is not None:
-            return self
+    def _check(self) -> None:
         self._url = OnvifUrl.parse(self._raw_url)
-        self._stop.clear()
-        self._worker = threading.Thread(target=self._thread_main, name="ptz-onvif", daemon=True)
-        self._worker.start()
-        if timeout is not None and not self._wait_connected(timeout):
-            reason = self.last_error or "no answer"
-            unauthorised = self._unauthorised
-            self.disconnect()
-            if unauthorised:
-                raise PtzPortError(f"{self.port}: the camera refused the user name or password ({reason})")
-            raise PtzError(f"{self.port}: no ONVIF PTZ camera within {timeout:g} s ({reason})")
-        return self
 
-    def _wait_connected(self, timeout: float) -> bool:
-        """Wait for the first connection; give up early when the camera refused the credentials."""
-        deadline = time.monotonic() + timeout
-        while not self._connected.wait(min(0.05, max(0.0, deadline - time.monotonic()))):
-            if self._unauthorised or time.monotonic() >= deadline:
-                return False
-        return True
+    def _hopeless(self) -> bool:
+        return self._unauthorised or self._not_onvif
 
-    def disconnect(self) -> None:
-        """Stop the worker and close the session; pending queries fail with :class:`PtzError`."""
-        self._stop.set()
-        self._poke()
-        if self._worker is not None:
-            self._worker.join()
-            self._worker = None
+    def _connect_error(self, timeout: float) -> PtzError:
+        reason = self.last_error or "no answer"
+        if self._unauthorised:
+            return PtzPortError(f"{self.port}: the camera refused the user name or password ({reason})")
+        if self._not_onvif:
+            return PtzError(f"{self.port}: not an ONVIF PTZ camera: {reason}")
+        return PtzError(f"{self.port}: no ONVIF PTZ camera within {timeout:g} s ({reason})")
 
-    def __enter__(self) -> OnvifDriver:
-        return self.connect()
+    def _wake(self) -> None:
+        loop, wakeup = self._loop, self._wakeup
+        if loop is not None and wakeup is not None:
+            try:
+                loop.call_soon_threadsafe(wakeup.set)
+            except RuntimeError:  # the loop has just closed
+                pass
 
-    def __exit__(self, *exc) -> None:
-        self.disconnect()
-
-    @property
-    def connected(self) -> bool:
-        return self._connected.is_set()
-
-    def set_target(self, pan: float, tilt: float, zoom: float) -> DeviceTarget:
-        """Aim at omnijax ``pan``, ``tilt`` (rad) with zoom factor ``zoom``; returns at once (see PtzDriver)."""
-        t = self.profile.to_device(pan, tilt, zoom)
-        if t.clamped != self._clamped:
-            if t.clamped:
-                log.warning("PTZ target clamped to the device's limits on %s (pan %.2f deg, tilt %.2f deg, "
-                            "zoom %.2fx requested)", ", ".join(t.clamped), np.degrees(pan), np.degrees(tilt), zoom)
-            else:
-                log.info("PTZ target back within the device's limits")
-            self._clamped = t.clamped
-        with self._lock:
-            if t.clamped:
-                self._counts["clamped"] += 1
-            if self._target is not None and self._sent_seq < self._seq:
-                self._counts["superseded"] += 1
-            self._target = t
-            self._seq += 1
-        self._poke()
-        return t
-
-    @property
-    def target(self) -> DeviceTarget | None:
-        return self._target
-
-    @property
-    def sequence(self) -> int:
-        with self._lock:
-            return self._seq
-
-    def take_writes(self) -> list[tuple[int, float]]:
-        """(sequence number, ``time.monotonic()``) of each move request handed to the HTTP transport since
-        the last call (for frame-to-wire latency)."""
-        with self._lock:
-            out = list(self._writes)
-            self._writes.clear()
-        return out
+    def _extra_stats(self) -> dict:
+        return {"onvif": dict(self.discovered), "moving": self._moving}
 
     def capabilities(self):
         """What this camera offers (a :class:`runtime.ptz.transports.Capabilities`), as discovered at the last
@@ -270,7 +249,7 @@ class OnvifDriver:
         from .transports import Capabilities
 
         p = self.profile
-        with self._lock:
+        with self._cond:
             d = dict(self.discovered)
             fallbacks = self._counts["timer_fallbacks"]
         notes = []
@@ -288,78 +267,11 @@ class OnvifDriver:
             zoom=(float(p.zoom.magnification[0]), float(p.zoom.magnification[-1])),
             limits_deg={"pan": tuple(p.pan.limits_deg), "tilt": tuple(p.tilt.limits_deg)}, notes=tuple(notes))
 
-    def request_position(self) -> Future:
-        """Ask the camera where it is (GetStatus; the driver's estimate where the camera reports no position)."""
-        fut: Future = Future()
-        with self._lock:
-            if not self.connected:
-                fut.set_exception(PtzError(f"{self.port}: not connected"))
-                return fut
-            self._queries.append(fut)
-        self._poke()
-        return fut
-
-    def query_position(self, timeout: float = 2.0) -> PtzPosition:
-        return self.request_position().result(timeout)
-
-    def reached(self, tolerance: int = 1) -> bool:
-        """Whether the camera reports the latest target, within ``tolerance`` device units per axis."""
-        t = self._target
-        if t is None:
-            return True
-        try:
-            pos = self.query_position()
-        except (PtzError, TimeoutError):
-            return False
-        return all(self.profile.units_apart(axis, a, b) <= tolerance
-                   for axis, a, b in zip(_AXES, pos.units, (t.pan, t.tilt, t.zoom)))
-
-    def wait_reached(self, timeout: float, tolerance: int = 1, poll_s: float = 0.05) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.connected and self.reached(tolerance):
-                return True
-            time.sleep(poll_s)
-        return False
-
-    @property
-    def counters(self) -> dict[str, int]:
-        """``commands`` (SOAP requests sent), ``errors`` (faults, time-outs, malformed replies, outages),
-        ``reconnects``."""
-        with self._lock:
-            return {k: self._counts[k] for k in ("commands", "errors", "reconnects")}
-
-    def stats(self) -> dict:
-        """All counters, what discovery found, and request-to-reply latencies (ms) of moves and queries."""
-        with self._lock:
-            out: dict = dict(self._counts)
-            lat = {k: 1e3 * np.asarray(v) for k, v in self._latency.items()}
-            out["onvif"] = dict(self.discovered)
-        out["connected"] = self.connected
-        out["moving"] = self._moving
-        out["latency_ms"] = {
-            k: ({"p50": float(np.median(v)), "p99": float(np.percentile(v, 99)), "n": int(v.size)} if v.size
-                else {"n": 0}) for k, v in lat.items()}
-        return out
-
     # ------------------------------------------------------------------------------------
     # Worker
     # ------------------------------------------------------------------------------------
 
-    def _poke(self) -> None:
-        loop, wake = self._loop, self._wake
-        if loop is not None and wake is not None:
-            try:
-                loop.call_soon_threadsafe(wake.set)
-            except RuntimeError:  # the loop has just closed
-                pass
-
-    def _count(self, *names: str) -> None:
-        with self._lock:
-            for n in names:
-                self._counts[n] += 1
-
-    def _thread_main(self) -> None:
+    def _run(self) -> None:
         try:
             asyncio.run(self._main())
         except Exception as exc:  # the worker never dies silently: say why, fail the queries
@@ -371,7 +283,7 @@ class OnvifDriver:
 
     async def _main(self) -> None:
         self._loop = asyncio.get_running_loop()
-        self._wake = asyncio.Event()
+        self._wakeup = asyncio.Event()
         backoff = self._link.reconnect_backoff_s[0]
         while not self._stop.is_set():
             cam = None
@@ -381,10 +293,10 @@ class OnvifDriver:
                 await self._serve(cam)
             except _LinkLost as exc:
                 if not self._stop.is_set():
-                    self._fail(str(exc), isinstance(exc, _Unauthorised))
+                    self._fail(exc)
             except Exception as exc:  # anything the library raised that _call did not classify
                 if not self._stop.is_set():
-                    self._fail(f"{type(exc).__name__}: {exc}", False)
+                    self._fail(_LinkLost(f"{type(exc).__name__}: {exc}"))
             finally:
                 self._connected.clear()
                 if cam is not None:
@@ -393,28 +305,19 @@ class OnvifDriver:
                 await self._sleep(backoff)
                 backoff = min(2 * backoff, self._link.reconnect_backoff_s[1])
 
-    def _fail(self, reason: str, unauthorised: bool) -> None:
-        self.last_error = reason
+    def _fail(self, exc: _LinkLost) -> None:
+        """The session failed with ``exc``; before a first connection, refused credentials and an answer that
+        is no ONVIF PTZ camera's end :meth:`connect`'s wait (the worker goes on trying meanwhile)."""
+        unauthorised = isinstance(exc, _Unauthorised)
         self._unauthorised = unauthorised or (self._unauthorised and not self._ever_connected)
+        self._not_onvif = isinstance(exc, _NotOnvif) and not self._ever_connected
         if unauthorised:
             self._count("unauthorised")
-        first = self._outage_since is None
-        if first:
-            self._outage_since = time.monotonic()
-            self._count("errors")
-        (log.warning if first else log.debug)("PTZ link lost on %s: %s; reconnecting", self.port, reason)
-        self._fail_queries(f"{self.port}: {reason}")
-
-    def _fail_queries(self, reason: str) -> None:
-        with self._lock:
-            queries, self._queries = list(self._queries), deque()
-        for fut in queries:
-            if not fut.done():
-                fut.set_exception(PtzError(reason))
+        self._link_lost(str(exc))
 
     async def _sleep(self, seconds: float) -> None:
         """Sleep up to ``seconds``, waking early for a new target, a query or a stop."""
-        wake = self._wake
+        wake = self._wakeup
         wake.clear()
         try:
             await asyncio.wait_for(wake.wait(), max(0.0, seconds))
@@ -441,6 +344,7 @@ class OnvifDriver:
         self._count("commands")
         t0 = time.perf_counter()
         why = ""
+        malformed = False
         try:
             reply = await asyncio.wait_for(getattr(service, name)(params or {}), self._link.ack_timeout_s)
         except zeep.exceptions.Fault as exc:
@@ -449,7 +353,7 @@ class OnvifDriver:
             if "NotAuthorized" in subcode or "NotAuthorized" in text or "not authori" in text.lower():
                 raise _Unauthorised(f"{operation}: {text}") from None
             self._count("faults", "errors")
-            log.warning("PTZ ONVIF: %s refused: %s", operation, text)
+            self._warn("PTZ ONVIF: %s refused: %s", operation, text)
             if fatal:
                 raise _LinkLost(f"{operation} refused: {text}") from None
             self._silent = 0  # the camera answered
@@ -459,23 +363,28 @@ class OnvifDriver:
             why = f"no answer to {operation} within {self._link.ack_timeout_s:g} s"
         except (aiohttp.ClientConnectionError, ConnectionError) as exc:
             raise _LinkLost(f"{operation}: {exc or type(exc).__name__}") from None
+        except _BadReply as exc:
+            self._count("malformed", "errors")
+            why, malformed = f"{operation} got {exc}", True
         except Exception as exc:  # malformed replies surface as many types from zeep, lxml and the library
             if self._is_http_auth_failure(exc):
                 raise _Unauthorised(f"{operation}: HTTP 401") from None
             if isinstance(exc, aiohttp.ClientError) or "Cannot connect" in str(exc):
                 raise _LinkLost(f"{operation}: {exc}") from None
             self._count("malformed", "errors")
-            why = f"malformed reply to {operation}: {type(exc).__name__}: {str(exc)[:120]}"
+            why, malformed = f"malformed reply to {operation}: {type(exc).__name__}: {str(exc)[:120]}", True
         else:
             self._silent = 0
             if kind:
-                with self._lock:
+                with self._cond:
                     self._latency[kind].append(time.perf_counter() - t0)
             return True if reply is None else reply  # an empty response (AbsoluteMoveResponse) is a success
         self._silent += 1
-        log.warning("PTZ ONVIF: %s", why)
-        if fatal or self._silent >= self._link.max_silent:
-            raise _LinkLost(why if fatal else f"{self._silent} requests in a row failed ({why})")
+        self._warn("PTZ ONVIF: %s", why)
+        if fatal:
+            raise (_NotOnvif if malformed else _LinkLost)(why)
+        if self._silent >= self._link.max_silent:
+            raise _LinkLost(f"{self._silent} requests in a row failed ({why})")
         return None
 
     @staticmethod
@@ -495,23 +404,19 @@ class OnvifDriver:
         except BaseException:
             await self._close(cam)
             raise
-        with self._lock:
-            if self._ever_connected:
-                self._counts["reconnects"] += 1
-            self._ever_connected = True
+        with self._cond:
             self._sent_seq = 0  # the latest target is sent again
-        self._unauthorised = False
-        self._connected.set()
-        outage, self._outage_since = self._outage_since, None
+        self._unauthorised = self._not_onvif = False
+        after = self._link_up()
         d = self.discovered
         log.info("PTZ connected on %s (ONVIF, profile %s, %s moves, status: %s)%s", self.port,
-                 d["profile_token"], d["mode"], d["move_status"],
-                 "" if outage is None else f" after {time.monotonic() - outage:.2f} s without")
+                 d["profile_token"], d["mode"], d["move_status"], after)
         return cam
 
     async def _discover(self, cam) -> None:
         self._silent = 0
         device = await cam.create_devicemgmt_service()
+        _capped(device.transport)
         services = await self._call(device, "GetServices", {"IncludeCapability": False}, fatal=True)
         xaddrs = {}
         for s in services or []:
@@ -529,16 +434,18 @@ class OnvifDriver:
         for ns, what in (("http://www.onvif.org/ver10/media/wsdl", "media"),
                          ("http://www.onvif.org/ver20/ptz/wsdl", "PTZ")):
             if ns not in xaddrs:
-                raise _LinkLost(f"the camera offers no {what} service")
+                raise _NotOnvif(f"the camera offers no {what} service")
         media = await cam.create_media_service()
         ptz = await cam.create_ptz_service()
+        for svc in (media, ptz):
+            _capped(svc.transport)
         for svc in (device, media, ptz):
             for client in (svc.zeep_client, svc.zeep_client_authless):
                 client.plugins.append(self._egress)
         profiles = await self._call(media, "GetProfiles", fatal=True) or []
         chosen = next((p for p in profiles if getattr(p, "PTZConfiguration", None) is not None), None)
         if chosen is None or not isinstance(getattr(chosen, "token", None), str):
-            raise _LinkLost("no media profile with a PTZ configuration")
+            raise _NotOnvif("no media profile with a PTZ configuration")
         config_token = getattr(chosen.PTZConfiguration, "token", None)
         options = await self._call(ptz, "GetConfigurationOptions", {"ConfigurationToken": config_token}, fatal=True)
         spaces = getattr(options, "Spaces", None)
@@ -550,7 +457,7 @@ class OnvifDriver:
                                     ("relative", "RelativePanTiltTranslationSpace"),
                                     ("continuous", "ContinuousPanTiltVelocitySpace")) if offered(space)]
         if not modes:
-            raise _LinkLost("the camera offers no pan/tilt move (no absolute, relative or continuous space)")
+            raise _NotOnvif("the camera offers no pan/tilt move (no absolute, relative or continuous space)")
         zoom_modes = [m for m, space in (("absolute", "AbsoluteZoomPositionSpace"),
                                          ("relative", "RelativeZoomTranslationSpace"),
                                          ("continuous", "ContinuousZoomVelocitySpace")) if offered(space)]
@@ -558,7 +465,7 @@ class OnvifDriver:
         status = await self._call(ptz, "GetStatus", {"ProfileToken": chosen.token}, fatal=True)
         pos = self._position_of(status)
         move_status = getattr(getattr(status, "MoveStatus", None), "PanTilt", None)
-        with self._lock:
+        with self._cond:
             self.discovered = {
                 "host": self._url.host, "port": self._url.port, "profile_token": chosen.token,
                 "configuration_token": config_token, "modes": modes, "zoom_modes": zoom_modes, "mode": modes[0],
@@ -600,17 +507,17 @@ class OnvifDriver:
         poll = max(self._link.retry_delay_s, 0.01)
         next_send = 0.0
         while not self._stop.is_set():
-            with self._lock:
+            with self._cond:
                 query = self._queries.popleft() if self._queries else None
             if query is not None:
                 await self._answer_query(query)
                 continue
             now = time.monotonic()
-            with self._lock:
+            with self._cond:
                 target, seq = self._target, self._seq
                 fresh = target is not None and self._sent_seq < seq
             if fresh and now >= next_send:
-                with self._lock:
+                with self._cond:
                     self._sent_seq = seq
                 await self._move(target, seq)
                 next_send = time.monotonic() + self._link.min_interval_s
@@ -647,7 +554,7 @@ class OnvifDriver:
     def _rate(self, axis: str) -> float:
         z = self.profile.zoom
         return ((z.position[-1] - z.position[0]) / z.seconds_full_range if axis == "zoom"
-                else self.profile.slew_units_s(axis))
+                else self.profile.move_units_s(axis))
 
     def _limits(self, axis: str) -> tuple[float, float]:
         if axis == "zoom":
@@ -693,10 +600,10 @@ class OnvifDriver:
         reply = await self._call(self._ptz, op, params, kind="move")
         if reply is None:
             if self._silent:  # unanswered or garbled (counted): it may not have moved, send the latest again
-                with self._lock:
+                with self._cond:
                     self._sent_seq = 0
             return  # a fault (counted): sent again when the target changes
-        with self._lock:
+        with self._cond:
             self._writes.append((seq, self._egress.at))
         self._set_estimate(here, now)
         self._eta = now + self._travel_s(here, goal) + self._link.retry_delay_s
@@ -724,7 +631,7 @@ class OnvifDriver:
         self._count("moves")
         reply = await self._call(self._ptz, "ContinuousMove", params, kind="move")
         if reply is not None:
-            with self._lock:
+            with self._cond:
                 self._writes.append((self._seq, self._egress.at))
             self._velocity = tuple(vi * self._rate(a) for vi, a in zip(v, _AXES))
             self._moving = True
@@ -752,7 +659,7 @@ class OnvifDriver:
             if mode == "relative" and pos is not None and self._goal is not None and \
                     max(abs(g - p) for g, p in zip(self._goal, pos)) > 1:
                 self._count("corrections")
-                with self._lock:
+                with self._cond:
                     self._sent_seq = 0  # send the latest target again, as a translation from where it is
         elif reported is None and now >= self._eta:
             self._count("timer_fallbacks")

@@ -12,7 +12,8 @@ class Packet:
     ``start`` and ``end`` are offsets into everything the parser has been fed
     (``end`` exclusive), so a caller can tell which bytes a packet came from.
     ``error`` is ``None`` for a well-framed packet; otherwise it names why the
-    packet cannot be valid (``"overlong"``, ``"short"``) and ``data`` holds its
+    packet cannot be valid (``"overlong"``, ``"short"``; ``"unterminated"``: a VISCA-over-IP
+    payload that is not one terminated message) and ``data`` holds its
     first bytes only (enough to read the address and reply with an error).
     """
 

@@ -83,6 +83,12 @@ class AxisSection(Section):
             return self.max_speed_deg_s
         return self.max_speed_deg_s * speed / self.max_speed
 
+    def move_deg_s(self) -> float:
+        """Slew rate (deg/s) of the moves omnijax commands: at ``speed``, the code every absolute move carries
+        (VISCA), or the top speed where the protocol sends none (``speed`` 0). The one figure the driver's
+        moves and the loop's arrival prediction share."""
+        return self.slew_deg_s(self.speed or None)
+
 
 class ZoomSection(Section):
     """The lens: device zoom position at each magnification (interpolated linearly between rows)."""
@@ -311,6 +317,17 @@ class DeviceProfile(Section):
         """Slew rate of ``axis`` in device units per second (at VISCA speed code ``speed``)."""
         sec = getattr(self, axis)
         return sec.slew_deg_s(speed) * sec.units_per_deg
+
+    def move_units_s(self, axis: Literal["pan", "tilt"]) -> float:
+        """Slew rate of ``axis`` in device units per second of the moves omnijax commands
+        (:meth:`AxisSection.move_deg_s`)."""
+        sec = getattr(self, axis)
+        return sec.move_deg_s() * sec.units_per_deg
+
+    def move_rates_deg_s(self) -> tuple[float, float]:
+        """(pan, tilt) slew rates of the moves omnijax commands, deg/s: what the real-time loop predicts the
+        PTZ's arrival with."""
+        return self.pan.move_deg_s(), self.tilt.move_deg_s()
 
 
 def parse_profile(mapping: dict, source: str = "<profile>") -> DeviceProfile:

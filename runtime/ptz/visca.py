@@ -1,8 +1,9 @@
 """Sony VISCA over RS-232: pure ``bytes`` encoders, an incremental parser, and decoders.
 
 A packet is a header byte ``0x80 | sender << 4 | receiver``, 1 to 14 message
-bytes (all below 0x80 for every message here), and the terminator ``0xFF``: at
-most 16 bytes. The controller is address 0, cameras 1 to 7, 8 is broadcast.
+bytes (all below 0x80 for every message here, though a camera must answer one that
+holds a higher byte, with a syntax error), and the terminator ``0xFF``: at most 16
+bytes. The controller is address 0, cameras 1 to 7, 8 is broadcast.
 Cameras hold two command buffers ("sockets" 1 and 2): a command is answered
 with ACK ``z0 4y FF`` when it is taken into socket y, and Completion
 ``z0 5y FF`` when it is done; inquiries are answered at once with
@@ -31,6 +32,9 @@ _PAN_TILTER, _CAMERA = 0x06, 0x04
 _ABSOLUTE, _PT_POSITION, _ZOOM_DIRECT = 0x02, 0x12, 0x47
 _ADDRESS_SET, _NETWORK_CHANGE = 0x30, 0x38
 _IF_CLEAR = bytes((_COMMAND, 0x00, 0x01))
+#: The bytes a packet can start with: a controller's to cameras 1-7 and the broadcast (``81``-``88``),
+#: and a camera's to the controller (``90``, ``a0``, ... ``f0``).
+HEADERS = frozenset((*range(0x81, 0x89), *range(0x90, 0xF1, 0x10)))
 
 
 class ErrorCode(IntEnum):
@@ -187,13 +191,14 @@ def zoom_position_reply(address: int, position: int) -> bytes:
 class ViscaParser:
     """Incremental VISCA framing: feed any chunks, get whole packets back.
 
-    A packet starts at any byte from 0x80 to 0xFE and ends at 0xFF. Since no
-    message byte reaches 0x80, a header byte met inside a packet starts a new
-    one (the unterminated one is dropped as garbage), so a valid packet is found
-    whatever garbage precedes it. Bytes outside packets are counted in
-    ``garbage_bytes``. A packet longer than :data:`MAX_PACKET` is reported once,
-    at its terminator, as a :class:`Packet` with ``error="overlong"``; one of
-    fewer than 3 bytes (``8x FF``) with ``error="short"``; both make a camera
+    A packet starts at a header byte (:data:`HEADERS`) and ends at 0xFF. A header
+    byte met inside a packet starts a new one (the unterminated one is dropped as
+    garbage), so a valid packet is found whatever garbage precedes it; any other
+    byte, 0x80 and above included, belongs to the packet (a camera answers such a
+    packet with a syntax error, as a real one does). Bytes outside packets are
+    counted in ``garbage_bytes``. A packet longer than :data:`MAX_PACKET` is
+    reported once, at its terminator, as a :class:`Packet` with ``error="overlong"``;
+    one of fewer than 3 bytes (``8x FF``) with ``error="short"``; both make a camera
     answer "message length error".
     """
 
@@ -214,16 +219,10 @@ class ViscaParser:
                 if not buf:
                     self.garbage_bytes += 1
                     continue
-                end = pos + 1
-                if self._overlong:
-                    out.append(Packet(bytes(buf), self._start, end, "overlong"))
-                elif len(buf) < 2:
-                    out.append(Packet(bytes(buf) + b"\xff", self._start, end, "short"))
-                else:
-                    out.append(Packet(bytes(buf) + b"\xff", self._start, end))
+                out.append(_packet(bytes(buf), self._start, pos + 1, self._overlong))
                 buf.clear()
                 self._overlong = False
-            elif b & 0x80:
+            elif b in HEADERS:
                 self.garbage_bytes += pos - self._start if buf else 0
                 buf[:] = bytes((b,))
                 self._start = pos
@@ -237,6 +236,26 @@ class ViscaParser:
                 self.garbage_bytes += 1
         self._offset += len(data)
         return out
+
+
+def _packet(head: bytes, start: int, end: int, overlong: bool) -> Packet:
+    """A terminated packet whose bytes before the terminator are ``head`` (its first 15 if ``overlong``)."""
+    if overlong:
+        return Packet(head, start, end, "overlong")
+    if len(head) < 2:
+        return Packet(head + b"\xff", start, end, "short")
+    return Packet(head + b"\xff", start, end)
+
+
+def message(payload: bytes) -> Packet:
+    """One VISCA-over-IP payload as one packet: a datagram is one message, never resynchronised.
+
+    ``error`` is ``"unterminated"`` when it does not end at its only 0xFF, else as
+    :class:`ViscaParser` reports (``"short"``, ``"overlong"``)."""
+    if not payload or payload[-1] != TERMINATOR or TERMINATOR in payload[:-1]:
+        return Packet(bytes(payload[:MAX_PACKET - 1]), 0, len(payload), "unterminated")
+    head = bytes(payload[:-1])
+    return _packet(head[:MAX_PACKET - 1], 0, len(payload), len(head) > MAX_PACKET - 1)
 
 
 # ----------------------------------------------------------------------------------------

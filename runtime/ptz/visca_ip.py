@@ -36,7 +36,7 @@ from dataclasses import dataclass
 from urllib.parse import urlsplit
 
 from .errors import PtzPortError
-from .visca import ViscaParser, pan_tilt_position_inquiry
+from .visca import ErrorCode, ViscaParser, error, message, pan_tilt_position_inquiry
 
 DEFAULT_PORT = 52381
 HEADER = struct.Struct(">HHI")
@@ -104,10 +104,15 @@ def parse_url(url: str) -> tuple[str, int]:
 class ViscaIpCamera:
     """A VISCA camera behind the IP framing: :meth:`receive` a datagram, :meth:`tick` for completions.
 
-    Both return datagrams to send back. A repeated sequence number (the controller's
-    retry) is answered with the replies already given, without executing again; one
-    lower than the last is a sequence error; anything malformed gets a message error (or
-    nothing, if not even its header can be read). ``errors`` counts all of these.
+    Both return datagrams to send back. A datagram is one VISCA message, never
+    resynchronised: a payload that does not end at its only 0xFF gets a message error, one
+    the camera cannot parse (an unknown command, a byte of 0x80 or above in its body, a
+    header that is not a controller's) a syntax error ``90 60 02 FF`` in a reply with its
+    sequence number. A repeated sequence number (the controller's retry) is answered with
+    the replies already given, without executing again; one lower than the last is a
+    sequence error; a malformed header gets a message error (or nothing, if not even its
+    header can be read). ``errors`` counts the framing errors, the camera's own ``errors``
+    the rest.
     """
 
     def __init__(self, camera) -> None:
@@ -142,12 +147,15 @@ class ViscaIpCamera:
                 self.errors += 1
                 return [frame(CONTROL_REPLY, d.seq, SEQUENCE_ERROR)]
         self.last_seq = d.seq
-        packets = ViscaParser().feed(d.payload)
-        if len(packets) != 1 or packets[0].end != len(d.payload):
+        packet = message(d.payload)
+        if packet.error == "unterminated":
             self.errors += 1
             self._last_replies = [frame(CONTROL_REPLY, d.seq, MESSAGE_ERROR)]
+        elif packet.data[0] >> 4 != 0x8:  # not a controller's header: a message the camera cannot parse
+            self.camera.errors += 1
+            self._last_replies = [frame(REPLY, d.seq, error(self.camera.address, 0, ErrorCode.SYNTAX))]
         else:
-            self._last_replies = self._wrap(self.camera.receive(packets[0], now), d.seq)
+            self._last_replies = self._wrap(self.camera.receive(packet, now), d.seq)
         return list(self._last_replies)
 
     def tick(self, now: float) -> list[bytes]:
@@ -330,6 +338,9 @@ class ViscaIpPort:
                     self._outstanding.pop(d.seq, None)
                 elif d.payload != RESET:
                     self.counters["malformed_datagrams"] += 1
+                return
+            if message(d.payload).error == "unterminated":  # one datagram, one message: nothing to resynchronise
+                self.counters["malformed_datagrams"] += 1
                 return
             if d.seq not in self._mine:
                 self.counters["stale_replies"] += 1

@@ -5,7 +5,10 @@ The control thread hands each processed frame (and each fault record) to :class:
 a bounded queue and never waits for it (except with ``--pace all``, where no frame is late and
 every one is drawn): when the queue is full the item is skipped and counted,
 and the summary lists which frames the video and the log lack (``off_path`` in ``summary.json``,
-docs/runtime.md). What the hooks see is a snapshot taken on the control thread (the tracks
+docs/runtime.md). The log is line-buffered: every line is in the file as soon as it is written (the
+staging folder keeps it whatever happens to the process). Told to hurry (a second Ctrl-C while the
+outputs are written), it writes the log lines of what is still queued without drawing them
+(``undrawn``). What the hooks see is a snapshot taken on the control thread (the tracks
 confirmed at that frame, the counters then), so that drawing never reads state the control
 thread is changing.
 """
@@ -34,14 +37,15 @@ class OffPath:
     """
 
     def __init__(self, log_path: Path, hooks: Callable | None, describe: Callable, record_time: Callable,
-                 size: int = QUEUE_SIZE, block: bool = False):
+                 size: int = QUEUE_SIZE, block: bool = False, hurry: threading.Event | None = None):
         self.hooks, self.describe, self.record_time, self.block = hooks, describe, record_time, block
+        self.hurry = hurry
         self.queue: queue.Queue = queue.Queue(maxsize=size)
         self.size = size
-        self.done = self.skipped = self.max_waiting = 0
+        self.done = self.skipped = self.max_waiting = self.undrawn = 0
         self.skipped_frames: list[int] = []
         self.error: BaseException | None = None
-        self._log = log_path.open("w")
+        self._log = log_path.open("w", buffering=1)  # line-buffered: every line is in the file as it is written
         self._thread = threading.Thread(target=self._run, name="omnijax-off-path", daemon=True)
         self._thread.start()
 
@@ -77,7 +81,7 @@ class OffPath:
 
     def summary(self) -> dict:
         return {"queue_size": self.size, "done": self.done, "skipped": self.skipped,
-                "skipped_frames": self.skipped_frames, "max_waiting": self.max_waiting}
+                "skipped_frames": self.skipped_frames, "max_waiting": self.max_waiting, "undrawn": self.undrawn}
 
     def _run(self) -> None:
         while True:
@@ -95,7 +99,9 @@ class OffPath:
         record = item["record"]
         if "frame" in item:
             t = time.monotonic()
-            if self.hooks is not None:
+            if self.hurry is not None and self.hurry.is_set():  # told to finish quickly: the log line only
+                self.undrawn += 1
+            elif self.hooks is not None:
                 record.update(self.hooks(record, item["frame"], item["dets"], item["z"], item["tracks"],
                                          item["commands"], item["status"]) or {})
             t = self.record_time("draw", t)

@@ -117,9 +117,11 @@ class Timings:
     """Per-stage and end-to-end times (ms)."""
 
     stages: dict[str, Samples] = field(default_factory=lambda: {s: Samples() for s in STAGES})
-    latency: Samples = field(default_factory=Samples)  # frame available -> PTZ bytes written (driver's stamps)
-    compute: Samples = field(default_factory=Samples)  # frame available -> command handed to the driver
+    latency: Samples = field(default_factory=Samples)  # frame arrived -> PTZ bytes written (driver's stamps)
+    compute: Samples = field(default_factory=Samples)  # frame arrived -> command handed to the driver
     frame: Samples = field(default_factory=Samples)
+    #: every processed frame: arrived -> its PTZ bytes written, or (nothing written for it) -> its step's end
+    age: Samples = field(default_factory=Samples)
 
     @staticmethod
     def stats(samples: Samples) -> dict:
@@ -185,6 +187,9 @@ class RealTimeLoop:
         self.target_frames = [0] * len(links)
         self._last: list[Command | None] = [None] * len(links)
         self._stop = threading.Event()
+        #: set by a second Ctrl-C or SIGTERM (``hurried_by``): finish quickly, keeping what was recorded
+        self.hurry = threading.Event()
+        self.hurried_by: str | None = None
         self._old_handlers: dict = {}
         self.t_start = time.monotonic()
         self.stop_reason = "source ended"
@@ -206,9 +211,19 @@ class RealTimeLoop:
         self._stop.set()
 
     def install_signal_handlers(self) -> None:
-        """Ctrl-C and SIGTERM end the loop cleanly (PTZ home, summary written); see :meth:`restore_signal_handlers`."""
+        """Ctrl-C and SIGTERM end the loop cleanly (PTZ home, summary written); a second one while the outputs are
+        written sets :attr:`hurry`: what is left is cut short (no more drawing, no wait for the PTZ to get home)
+        and what was recorded is kept. Until :meth:`restore_signal_handlers`."""
         for sig in (signal.SIGINT, signal.SIGTERM):
-            self._old_handlers[sig] = signal.signal(sig, lambda s, _f: self.stop(signal.Signals(s).name))
+            self._old_handlers[sig] = signal.signal(sig, self._on_signal)
+
+    def _on_signal(self, signum: int, _frame) -> None:
+        name = signal.Signals(signum).name
+        if not self._stop.is_set():
+            self.stop(name)
+        elif not self.hurry.is_set():
+            self.hurried_by = name
+            self.hurry.set()
 
     def restore_signal_handlers(self) -> None:
         """Put back the handlers :meth:`install_signal_handlers` replaced."""
@@ -243,7 +258,8 @@ class RealTimeLoop:
         self.t_start = t_start = time.monotonic()
         last_status = t_start
         self.off_path = OffPath(self.log_path, self.on_frame, self._describe, self._record,
-                                block=not getattr(self.capture, "paced", True))
+                                block=not getattr(self.capture, "paced", True), hurry=self.hurry)
+        self.capture.begin()
         try:
             while not self._stop.is_set():
                 if self.cfg.max_frames is not None and self.counts["frames"] >= self.cfg.max_frames:
@@ -293,6 +309,7 @@ class RealTimeLoop:
             return
         self.counts["frames"] += 1
         t = time.monotonic()
+        record["wait_ms"] = round(1e3 * (t - frame.t), 3)  # how old it was when taken: a backlog shows here
         op = None
         if self.operator is not None:
             swap = self.operator.take_zones()
@@ -340,10 +357,16 @@ class RealTimeLoop:
             self.counts["commands_sent"] += 1
         t_sent = time.monotonic()
         self._record("send", t)
+        record["age_ms"] = round(1e3 * (t_sent - frame.t), 3)
         for k in sent:
             self.timings.compute.append(1e3 * (t_sent - frame.t))
             if self.links[k].driver is None:
                 self.timings.latency.append(1e3 * (t_sent - frame.t))
+        wired = [k for k in sent if self.links[k].driver is not None]
+        for k in wired:
+            self.links[k].step_ended(t_sent)
+        if not wired:  # the frame's age ends with its step (no command went to a PTZ)
+            self.timings.age.append(1e3 * (t_sent - frame.t))
         self._collect_writes()
         if self.on_control is not None:
             record.update(self.on_control(record, frame) or {})
@@ -481,17 +504,20 @@ class RealTimeLoop:
         return commands, held
 
     def _collect_writes(self) -> None:
-        """Frame-to-wire latency of the targets the drivers have written (superseded ones never are)."""
+        """Frame-to-wire latency and frame age of the targets the drivers have written (superseded ones never
+        are: their frames aged until their step ended)."""
         for link in self.links:
-            for ms in link.take_latencies():
-                self.timings.latency.append(ms)
+            latencies, ages = link.take_writes()
+            self.timings.latency.extend(latencies)
+            self.timings.age.extend(ages)
 
     def home(self, wait_s: float = 3.0) -> bool:
-        """Send every PTZ home (end of run); whether all reported being there within ``wait_s``."""
+        """Send every PTZ home (end of run); whether all reported being there within ``wait_s`` (not waited
+        for once :attr:`hurry` is set)."""
         drivers = [link.driver for link in self.links if link.driver is not None]
         for driver in drivers:  # all at once; then wait for each
             driver.set_target(*self.cfg.home)
-        reached = all([driver.wait_reached(wait_s) for driver in drivers])
+        reached = all([driver.wait_reached(wait_s, cancel=self.hurry) for driver in drivers])
         self._collect_writes()
         return reached
 
@@ -557,6 +583,7 @@ class RealTimeLoop:
             "seconds": getattr(self, "elapsed", 0.0),
             "stop_reason": self.stop_reason,
             "latency_ms": Timings.stats(self.timings.latency),
+            "frame_age_ms": Timings.stats(self.timings.age),
             "compute_latency_ms": Timings.stats(self.timings.compute),
             "frame_ms": Timings.stats(self.timings.frame),
             "stages_ms": {k: Timings.stats(v) for k, v in self.timings.stages.items()},
@@ -564,6 +591,7 @@ class RealTimeLoop:
             "faults": {"broken_frames": self.capture.counts["broken"],
                        "wrong_size_frames": self.capture.counts["wrong_size"],
                        "stale_frames": self.capture.counts["stale"], "dropped_frames": self.capture.counts["dropped"],
+                       "skipped_at_start": self.capture.counts["skipped_at_start"],
                        "deadline_overruns": self.counts["deadline_overruns"],
                        "source_ended": self.stop_reason == "source ended"},
             "off_path": self.off_path.summary() if self.off_path is not None else None,

@@ -25,8 +25,8 @@ class PtzLink:
 
     def __init__(self, index: int, driver, profile):
         self.index, self.driver, self.profile = index, driver, profile
-        self.rates = ((float(profile.pan.slew_deg_s()), float(profile.tilt.slew_deg_s())) if profile is not None
-                      else (1.0, 1.0))
+        #: the slew rates of the moves the driver commands (the speed code it sends), deg/s
+        self.rates = profile.move_rates_deg_s() if profile is not None else (1.0, 1.0)
         #: the last command sent (pan, tilt rad, zoom), when (``time.monotonic()``) and for which track
         self.sent: tuple[float, float, float] | None = None
         self.sent_at: float | None = None
@@ -34,7 +34,8 @@ class PtzLink:
         #: the frame stamp (s) by which the PTZ should have reached :attr:`sent`
         self.arrive_at = 0.0
         self.commands = 0
-        self._pending: dict[int, float] = {}  # driver sequence number -> frame available time
+        #: driver sequence number -> (frame available, its loop step ended), ``time.monotonic()``
+        self._pending: dict[int, tuple[float, float]] = {}
 
     def slew(self) -> Slew:
         """What the control call's head prediction needs of this PTZ (scalars; the loop stacks them)."""
@@ -73,26 +74,35 @@ class PtzLink:
             self.driver.set_target(cmd.pan, cmd.tilt, cmd.zoom)
             time.sleep(0)  # hand the GIL to the driver's worker now, so that the bytes go out at once
             if frame_t is not None:
-                self._pending[self.driver.sequence] = frame_t
+                self._pending[self.driver.sequence] = (frame_t, frame_t)
         self.arrive_at = stamp + self.slew_time((cmd.pan, cmd.tilt, cmd.zoom))
         self.sent = (cmd.pan, cmd.tilt, cmd.zoom)
         self.sent_at = time.monotonic()
         self.sent_track = cmd.track
         self.commands += 1
 
-    def take_latencies(self) -> list[float]:
-        """Frame-to-wire latencies (ms) of the targets the driver has written since the last call
-        (superseded ones never are)."""
+    def step_ended(self, t: float) -> None:
+        """The loop step that sent the last command ended at ``t`` (for a command superseded before the wire)."""
+        if self.driver is not None and self.driver.sequence in self._pending:
+            self._pending[self.driver.sequence] = (self._pending[self.driver.sequence][0], t)
+
+    def take_writes(self) -> tuple[list[float], list[float]]:
+        """Frame-to-wire latencies (ms) of the targets the driver has written since the last call, and the
+        frame ages (ms) they settle: a written target's frame aged until the write, a superseded one's
+        (never written) until its loop step ended."""
+        latencies: list[float] = []
+        ages: list[float] = []
         if self.driver is None:
-            return []
-        out = []
+            return latencies, ages
         for seq, t_write in self.driver.take_writes():
-            t_frame = self._pending.pop(seq, None)
-            if t_frame is not None:
-                out.append(1e3 * (t_write - t_frame))
+            pending = self._pending.pop(seq, None)
+            if pending is not None:
+                latencies.append(1e3 * (t_write - pending[0]))
+                ages.append(1e3 * (t_write - pending[0]))
             for k in [k for k in self._pending if k < seq]:
-                del self._pending[k]
-        return out
+                t_frame, t_step = self._pending.pop(k)
+                ages.append(1e3 * (t_step - t_frame))
+        return latencies, ages
 
     def link_status(self) -> dict | None:
         """The driver's link state and counters (``None``: no driver)."""

@@ -25,7 +25,7 @@ import numpy as np
 
 from omnijax import Rig, build_detector
 from omnijax.detection import polar_range
-from runtime.errors import UsageError, interrupted_during
+from runtime.errors import Interrupted, UsageError, interrupted_during
 from runtime.events import EventLog
 from runtime.frames import Source
 from runtime.output import dumps, staged_output
@@ -213,38 +213,64 @@ def run_session(rig: Rig, source: Source, out: Path, *, links: list[PtzLink], co
                 background_seconds=background_seconds, video=video, record=record, title=title, fovea=fovea,
                 hooks=hooks, control_hooks=control_hooks, screenshot_at=screenshot_at, console=console, mqtt=mqtt)
         setup_s = time.monotonic() - t0
-        loop.install_signal_handlers()
+        loop.install_signal_handlers()  # until the outputs are staged: a second signal hurries, never discards
         try:
-            with loop.capture:
-                loop.run()
+            summary = _finish(loop, stage, writer, recorder, source, setup_s, n_bg, first, console,
+                              mqtt, extra, finish)
         finally:
             loop.restore_signal_handlers()
-            homed = loop.home()
-            for w in (writer, recorder):
-                if w is not None:
-                    w.close()
-            loop.events.close()
-        summary = loop.summary()
-        summary["events"] = loop.events.summary()
-        if mqtt is not None:
-            summary["events"]["mqtt"] = mqtt.summary()
-        if console is not None:
-            summary["console"] = {"url": console.url, "operator": loop.counts["operator_frames"]}
-        view = stage / "view.png"
-        summary.update({"source": source.name, "setup_s": setup_s, "background_frames": n_bg,
-                        "learning": loop.learning, "first_frame": first, "ptz_homed": homed,
-                        "outputs": {"log": "log.jsonl", "events": "events.jsonl",
-                                    **({"video": writer.name} if writer else {}),
-                                    **({"record": recorder.name} if recorder else {}),
-                                    **({"view": view.name} if view.is_file() else {})}})
-        video_counters = _source_counters(source)  # a network stream: reconnects, drops, outage
-        if video_counters is not None:
-            summary["stream"] = video_counters
-        summary.update(extra or {})
-        if finish is not None:
-            finish(summary)
-        (stage / "summary.json").write_text(dumps(summary) + "\n")
+    if loop.hurried_by is not None:  # the outputs are in place; say that they were cut short
+        exc = Interrupted(loop.hurried_by)
+        exc.during, exc.kept = "while writing the outputs", str(out)
+        raise exc
     return summary
+
+
+def _finish(loop: RealTimeLoop, stage: Path, writer, recorder, source: Source, setup_s: float, n_bg: int, first: int,
+            console, mqtt, extra: dict | None, finish: Callable | None) -> dict:
+    """Run the loop until it stops, send the PTZ home, close the writers and write ``summary.json`` into
+    ``stage``; returns the summary. A second Ctrl-C or SIGTERM meanwhile (:attr:`RealTimeLoop.hurry`) cuts the
+    drawing and the wait for the PTZ short; what was recorded is written all the same."""
+    try:
+        with loop.capture:
+            loop.run()
+    finally:
+        homed = loop.home()
+        for w in (writer, recorder):
+            if w is not None:
+                w.close()
+        loop.events.close()
+    summary = loop.summary()
+    summary["events"] = loop.events.summary()
+    if mqtt is not None:
+        summary["events"]["mqtt"] = mqtt.summary()
+    if console is not None:
+        summary["console"] = {"url": console.url, "operator": loop.counts["operator_frames"]}
+    view = stage / "view.png"
+    summary.update({"source": source.name, "setup_s": setup_s, "background_frames": n_bg,
+                    "learning": loop.learning, "first_frame": first, "ptz_homed": homed,
+                    "finish_cut_short": loop.hurried_by,
+                    "outputs": {"log": "log.jsonl", "events": "events.jsonl",
+                                **({"video": writer.name} if writer else {}),
+                                **({"record": recorder.name} if recorder else {}),
+                                **({"view": view.name} if view.is_file() else {})}})
+    video_counters = _source_counters(source)  # a network stream: reconnects, drops, outage
+    if video_counters is not None:
+        summary["stream"] = video_counters
+    summary.update(extra or {})
+    if finish is not None:
+        finish(summary)
+    (stage / "summary.json").write_text(dumps(summary) + "\n")
+    return summary
+
+
+def home_warning(summary: dict) -> str | None:
+    """The last line a command prints when the PTZ did not report its home position at the end (``ptz_homed``
+    false in ``summary.json``), ``None`` when it did (or there was no PTZ)."""
+    if summary.get("ptz_homed", True):
+        return None
+    return ("warning: the PTZ did not report its home position at the end (summary.json ptz_homed: false); "
+            "it may still point where the run left it")
 
 
 def _source_counters(source) -> dict | None:
@@ -259,19 +285,41 @@ def _source_counters(source) -> dict | None:
 def _start(rig: Rig, source: Source, stage: Path, *, links: list[PtzLink], config: LoopConfig, paced: bool, n_bg: int,
            background_seconds: float | None, video: bool, record: bool, title: str, fovea: tuple, hooks: tuple,
            control_hooks: tuple, screenshot_at: int | None, console=None, mqtt=None):
-    """Start-up of :func:`run_session`: the background, the detector, the writers, the loop, compiled."""
+    """Start-up of :func:`run_session`: the background, the detector, the writers, the loop, compiled.
+
+    A live source's capture starts first and drains the source throughout (the background is learnt from
+    it), so that the loop starts on the newest frame, not on what piled up while it compiled."""
     W, H = rig.omni.image_size
-    frames = source.frames()
+    capture = Capture(source, paced=paced, shape=(H, W, 3)).start() if source.live else None
+    try:
+        return _start_on(capture, rig, source, stage, links=links, config=config, paced=paced,
+                         n_bg=n_bg, background_seconds=background_seconds, video=video, record=record, title=title,
+                         fovea=fovea, hooks=hooks, control_hooks=control_hooks, screenshot_at=screenshot_at,
+                         console=console, mqtt=mqtt)
+    except BaseException:
+        if capture is not None:
+            capture.stop()
+        raise
+
+
+def _start_on(capture: Capture | None, rig: Rig, source: Source, stage: Path, *, links: list[PtzLink],
+              config: LoopConfig, paced: bool, n_bg: int, background_seconds: float | None, video: bool, record: bool,
+              title: str, fovea: tuple, hooks: tuple, control_hooks: tuple, screenshot_at: int | None, console=None,
+              mqtt=None):
+    W, H = rig.omni.image_size
+    frames = source.stamped() if capture is None else None
     seconds = rig.detection.background_seconds if background_seconds is None else background_seconds
     step = learning_step(source.fps, n_bg, seconds)
-    bg, used, first = learn_from_frames(frames, n_bg, step, source.name)
+    images = capture.images() if capture is not None else (img for img, _ in frames)
+    bg, used, first = learn_from_frames(images, n_bg, step, source.name)
     if bg.mean.shape[:2] != (H, W):
         raise UsageError(f"{source.name}: frames are {bg.mean.shape[1]}x{bg.mean.shape[0]}, "
                          f"expected {W}x{H} (omni.image_size of the rig)")
     detector = build_detector(rig)
     writer = VideoOut(stage, source.fps or 25.0, (W + W // 2, H)) if video else None
     annot = Annotator(rig, title, list(fovea), [writer.write] if writer else [])
-    capture = Capture(source, paced=paced, frames=frames, first_index=first, shape=(H, W, 3))
+    if capture is None:
+        capture = Capture(source, paced=paced, frames=frames, first_index=first, shape=(H, W, 3))
     drawn = video or screenshot_at is not None or console is not None
     loop = RealTimeLoop(rig, detector, bg, capture, links, config, stage / "log.jsonl",
                         on_frame=chain_hooks(*hooks, annot if drawn else None),

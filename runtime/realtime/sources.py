@@ -1,13 +1,17 @@
 """The capture thread that keeps only the latest frame, and the loop's synthetic and faulty sources.
 
-Sources (:mod:`runtime.frames`: video files, image folders, camera devices; here: a
+Sources (:mod:`runtime.frames`: video files, image folders, camera devices, network streams; here: a
 synthetic world, and a wrapper injecting faults) yield RGB uint8 frames; a :class:`Capture`
 runs one in its own thread and keeps only the newest frame with its time stamp
-(``time.monotonic()`` when it became available): the loop takes it when ready, frames it
-never took are counted as dropped, frames older than ``max_age_s`` when taken are rejected
-as stale (not processed late). ``paced`` sources (video files, image folders and synthetic
-scenarios played "live") release frames at their frame rate like a camera; unpaced ones
-hand over every frame (offline processing).
+(``time.monotonic()`` when it arrived: for a live source when its bytes were in, else when it
+became available): the loop takes it when ready, frames it never took are counted as dropped,
+frames older than ``max_age_s`` when taken are rejected as stale (not processed late). ``paced``
+sources (video files, image folders and synthetic scenarios played "live") release frames at their
+frame rate like a camera; unpaced ones hand over every frame (offline processing). A live source
+(camera, network stream) is its own clock: it is never paced but drained, from the moment its
+capture starts (before the background is learnt), so that no backlog builds up in the stream while
+the loop starts; until the loop is ready (:meth:`Capture.begin`) only the newest frame is kept,
+and what it replaced is counted as ``skipped_at_start``.
 """
 
 from __future__ import annotations
@@ -24,11 +28,12 @@ from runtime.frames import Source
 
 @dataclass
 class Frame:
-    """A captured frame: its index in the source, the time it became available, the image, and its stamp.
+    """A captured frame: its index in the source, the time it arrived, the image, and its stamp.
 
-    ``t`` is ``time.monotonic()`` when the frame became available (latency is measured from
-    it); ``stamp`` is the frame's own time in seconds (the tracker's clock): ``index / fps``
-    for files, folders and synthetic scenes, ``t`` for live devices. ``image`` is ``None``
+    ``t`` is ``time.monotonic()`` when the frame arrived (live sources: its bytes in, before decoding)
+    or became available (files, folders, synthetic scenes): latency and frame age are measured from it;
+    ``stamp`` is the frame's own time in seconds (the tracker's clock): ``index / fps``
+    for files, folders and synthetic scenes, ``t`` for live sources. ``image`` is ``None``
     for a frame the source failed to deliver (a broken frame).
     """
 
@@ -41,15 +46,17 @@ class Frame:
 class Capture:
     """Runs a source in a thread, keeping only the latest frame (see the module docstring).
 
-    ``frames`` continues an iterator already started on ``source.frames()`` (after the
-    background was learnt from its first ``first_index`` frames)."""
+    ``frames`` continues an iterator already started on ``source.stamped()`` (after the
+    background was learnt from its first ``first_index`` frames); a live source's capture starts
+    on the source itself, and the background is learnt from it (:meth:`images`)."""
 
     def __init__(self, source: Source, paced: bool = True, max_age_s: float | None = None,
-                 frames: Iterator[np.ndarray | None] | None = None, first_index: int = 0,
+                 frames: Iterator[tuple[np.ndarray | None, float]] | None = None, first_index: int = 0,
                  shape: tuple[int, ...] | None = None):
         self.source, self.paced, self.shape = source, paced, shape
-        self._frames = source.frames() if frames is None else frames
+        self._frames = source.stamped() if frames is None else frames
         self._first = first_index
+        self._live = source.live
         period = 1.0 / source.fps if source.fps else 0.04
         self.max_age_s = max_age_s if max_age_s is not None else 2.5 * period
         self._period = period
@@ -57,16 +64,30 @@ class Capture:
         self._latest: Frame | None = None
         self._taken = True
         self._done = False
+        self._begun = False
         self._stop = threading.Event()
-        self.counts = {"captured": 0, "dropped": 0, "stale": 0, "broken": 0, "wrong_size": 0}
+        self.counts = {"captured": 0, "dropped": 0, "stale": 0, "broken": 0, "wrong_size": 0, "skipped_at_start": 0}
         self._thread = threading.Thread(target=self._run, name="capture", daemon=True)
 
-    def __enter__(self) -> Capture:
-        self._thread.start()
+    def start(self) -> Capture:
+        """Start reading (once; a live source's capture is started before the background is learnt)."""
+        if self._thread.ident is None:
+            self._thread.start()
         return self
+
+    def __enter__(self) -> Capture:
+        return self.start()
 
     def __exit__(self, *exc) -> None:
         self.stop()
+
+    def begin(self) -> None:
+        """The loop is ready for frames: from now on ``paced`` rules, and a frame it had no time for is dropped
+        (a live source's frames replaced while it started are ``skipped_at_start``)."""
+        with self._lock:
+            self._begun = True
+            self.counts["skipped_at_start"], self.counts["dropped"] = self.counts["dropped"], 0
+            self._lock.notify_all()
 
     def stop(self) -> None:
         self._stop.set()
@@ -84,16 +105,16 @@ class Capture:
     def _run(self) -> None:
         t_next = time.monotonic()
         try:
-            for i, img in enumerate(self._frames, start=self._first):
+            for i, (img, t_arrived) in enumerate(self._frames, start=self._first):
                 if self._stop.is_set():
                     break
-                if self.paced and self.source.fps:
+                if self.paced and self.source.fps and not self._live:  # a live source is its own clock
                     t_next += self._period
                     delay = t_next - time.monotonic()
                     if delay > 0:
                         self._stop.wait(delay)
                 with self._lock:
-                    if not self.paced:
+                    if not self.paced and (self._begun or not self._live):  # every frame: wait for it to be taken
                         while not self._taken and not self._stop.is_set():
                             self._lock.wait(0.1)
                     if not self._taken:
@@ -102,9 +123,9 @@ class Capture:
                         self.counts["broken"] += 1
                     elif self.shape is not None and img.shape != self.shape:
                         self.counts["wrong_size"] += 1
-                    now = time.monotonic()
-                    stamp = now if self.source.live or not self.source.fps else i / self.source.fps
-                    self._latest = Frame(i, now, img, stamp)
+                    t = t_arrived if self._live else time.monotonic()
+                    stamp = t if self._live or not self.source.fps else i / self.source.fps
+                    self._latest = Frame(i, t, img, stamp)
                     self._taken = False
                     self.counts["captured"] += 1
                     self._lock.notify_all()
@@ -139,6 +160,14 @@ class Capture:
                 if left <= 0:
                     return None
                 self._lock.wait(left)
+
+    def images(self) -> Iterator[np.ndarray | None]:
+        """Each new frame's image as it is taken (``None``: a broken one), until the source ends: what the
+        background is learnt from while a live source is drained."""
+        while not self.ended:
+            frame = self.get(timeout=0.5)
+            if frame is not None:
+                yield frame.image
 
 
 class SyntheticSource(Source):
@@ -183,15 +212,19 @@ class FaultySource(Source):
         self.fps, self.name, self.live = source.fps, source.name, source.live
 
     def frames(self):
-        for i, img in enumerate(self.source.frames()):
+        for img, _ in self.stamped():
+            yield img
+
+    def stamped(self):
+        for i, (img, t) in enumerate(self.source.stamped()):
             if self.plan.end is not None and i >= self.plan.end:
                 return
             if i in self.plan.broken:
-                yield None
+                yield None, t
             elif i in self.plan.wrong_size and img is not None:
-                yield np.ascontiguousarray(img[::2, ::2])
+                yield np.ascontiguousarray(img[::2, ::2]), t
             else:
-                yield img
+                yield img, t
 
     def close(self):
         self.source.close()

@@ -2,9 +2,16 @@
 
 :class:`MjpegServer` serves ``multipart/x-mixed-replace`` JPEG frames (``images`` in turn, or
 numbered gradient images, the frame number in the top-left pixel block) at ``fps`` from a
-daemon thread;
+daemon thread, each part on a fixed schedule (part ``n`` of a stream ``n / fps`` after it began);
 :meth:`MjpegServer.drop` closes every open stream and refuses new ones for a while (a camera
-rebooting), :meth:`close` stops it. Each stream ends by itself after ``max_frames``.
+rebooting), :meth:`close` stops it. Each stream ends by itself after ``max_frames``, the server
+after ``lifetime_s``.
+
+It stamps its parts: every part sent gets the next number of the server (across streams and
+reconnections), ``sent[k]`` is the ``time.monotonic()`` at which part ``k`` was sent (the clock of
+``log.jsonl``, on the same machine), each part carries it in an ``X-Timestamp`` header, and with
+``stamp=True`` the number is drawn into the image itself (:func:`stamp_image`, read back by
+:func:`read_stamp`), so that a recorded frame says which part it was.
 """
 
 from __future__ import annotations
@@ -30,15 +37,35 @@ def frame_image(n: int, size: tuple[int, int] = (160, 120)) -> np.ndarray:
     return img
 
 
+#: Bits of the part number drawn by :func:`stamp_image`: one 16x16 block each along the top row.
+STAMP_BITS = 20
+
+
+def stamp_image(img: np.ndarray, k: int) -> np.ndarray:
+    """A copy of ``img`` with ``k`` drawn in its top row, bit i a 16x16 block at x = 16 i (white: 1)."""
+    out = img.copy()
+    for i in range(STAMP_BITS):
+        out[:16, 16 * i:16 * (i + 1)] = 255 if k >> i & 1 else 0
+    return out
+
+
+def read_stamp(img: np.ndarray) -> int:
+    """The number :func:`stamp_image` drew (exact through JPEG: each block is flat)."""
+    return sum(1 << i for i in range(STAMP_BITS) if img[4:12, 16 * i + 4:16 * i + 12].mean() > 127)
+
+
 class MjpegServer:
     def __init__(self, fps: float = 25.0, max_frames: int = 100_000, size: tuple[int, int] = (160, 120),
-                 images: list[np.ndarray] | None = None):
+                 images: list[np.ndarray] | None = None, stamp: bool = False, lifetime_s: float = 600.0):
         self.fps, self.max_frames, self.size = fps, max_frames, size
-        self.images = images
+        self.images, self.stamp = images, stamp
         self.streams = 0
+        #: ``time.monotonic()`` when each part was sent, by the server's part number
+        self.sent: list[float] = []
         self._down_until = 0.0
         self._epoch = 0
         self._lock = threading.Lock()
+        self._lifetime_s = lifetime_s
         server = self
 
         class Handler(BaseHTTPRequestHandler):
@@ -56,15 +83,22 @@ class MjpegServer:
                 self.send_response(200)
                 self.send_header("Content-Type", f"multipart/x-mixed-replace; boundary={BOUNDARY}")
                 self.end_headers()
+                start = time.monotonic()
                 try:
                     for n in range(server.max_frames):
                         if server._stop.is_set() or server._epoch != epoch:
                             return
                         img = server.images[n % len(server.images)] if server.images else frame_image(n, server.size)
+                        with server._lock:
+                            k = len(server.sent)
+                            server.sent.append(time.monotonic())
+                        if server.stamp:
+                            img = stamp_image(img, k)
                         ok, jpg = cv2.imencode(".jpg", cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
                         self.wfile.write(f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\n"
+                                         f"X-Timestamp: {server.sent[k]:.6f}\r\n"
                                          f"Content-Length: {len(jpg)}\r\n\r\n".encode() + jpg.tobytes() + b"\r\n")
-                        time.sleep(1 / server.fps)
+                        server._stop.wait(max(0.0, start + (n + 1) / server.fps - time.monotonic()))
                 except (BrokenPipeError, ConnectionResetError):
                     return
 
@@ -77,6 +111,9 @@ class MjpegServer:
 
     def start(self) -> MjpegServer:
         self._thread.start()
+        self._timer = threading.Timer(self._lifetime_s, self.close)  # stops by itself
+        self._timer.daemon = True
+        self._timer.start()
         return self
 
     def drop(self, seconds: float) -> None:
@@ -86,7 +123,10 @@ class MjpegServer:
             self._down_until = time.monotonic() + seconds
 
     def close(self) -> None:
+        if self._stop.is_set():
+            return
         self._stop.set()
+        self._timer.cancel()
         self.httpd.shutdown()
         self.httpd.server_close()
 

@@ -99,3 +99,19 @@ def test_loop_config_in_code_is_checked_by_the_same_metadata():
     with pytest.raises(ValueError, match="zoom_rule: expected one of paper, calibrated"):
         LoopConfig(zoom_rule="widest")
     assert LoopConfig(max_frames=None, tracker="nearest").tracker == "nearest"
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly():
+    """``omnijax variance ... --json | head -1``: stdout's reader is gone before anything is written; the
+    command ends with 141 (128 + SIGPIPE, as the shell reports it) and nothing on stderr."""
+    import subprocess
+    import sys
+
+    from tests.paths import ROOT
+
+    argv = ["variance", "--config", PAPER, "--foot", "100", "0.7", "--method", "analytic", "--json"]
+    proc = subprocess.Popen([sys.executable, "-m", "runtime.cli", *argv], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()  # the reader went away
+    _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 141 and stderr == "", stderr[-2000:]

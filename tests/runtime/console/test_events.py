@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import time
 from types import SimpleNamespace
 
 import numpy as np
@@ -14,9 +15,19 @@ from runtime.realtime.tracker import Track
 from tests.runtime.console.broker import Broker, Subscriber
 
 
-def _frames(log, script):
-    """Run ``log`` over frames 0, 1, ... at 25 fps; ``script[k]`` is the list of tracks confirmed at frame k."""
-    for k, tracks in enumerate(script):
+def _until(cond, timeout=10.0) -> bool:
+    end = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > end:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+def _frames(log, script, start=0):
+    """Run ``log`` over frames start, start + 1, ... at 25 fps; ``script[k]`` is the list of tracks
+    confirmed at frame start + k."""
+    for k, tracks in enumerate(script, start):
         log(None, SimpleNamespace(index=k, stamp=k / 25), None, None, tracks, None, None)
 
 
@@ -27,13 +38,15 @@ def test_events_are_logged_and_published(tmp_path):
     with Broker() as broker:
         sub = Subscriber(broker.port, "home/hall/#")
         mqtt = MqttPublisher(f"{broker.url}/home/hall").start()
+        # connected first: what is queued while (re)connecting may overtake (see runtime/events/mqtt.py)
+        assert _until(lambda: mqtt.connected)
         log = EventLog(tmp_path, face_image=lambda _track: face, sinks=(mqtt,))
         script = [[walker, blob]] * 5
         _frames(log, script[:2])
         walker.trusted = True
-        _frames(log, [[]] * 2 + script[2:])  # frames 0-1 again would repeat: stamps only grow
+        _frames(log, script[2:], start=2)
         walker.captured = True
-        _frames(log, [[walker, blob]] * 6 + [[blob]] * 40)
+        _frames(log, [[walker, blob]] * 6 + [[blob]] * 40, start=5)
         got = sub.wait_for(lambda m: m[0] == "home/hall/events/person_left")
         status = sub.wait_for(lambda m: m[0] == "home/hall/status")
         mqtt.close()

@@ -86,7 +86,9 @@ class Kind:
 
 
 def _visca_ok(p: bytes) -> bool:
-    return 3 <= len(p) <= visca.MAX_PACKET and 0x80 <= p[0] < 0xFF and p[-1] == 0xFF and all(b < 0x80 for b in p[1:-1])
+    """Framed as a packet: a header, no header nor terminator inside (a body byte may be >= 0x80), the terminator."""
+    return (3 <= len(p) <= visca.MAX_PACKET and p[0] in visca.HEADERS and p[-1] == 0xFF
+            and not any(b in visca.HEADERS or b == 0xFF for b in p[1:-1]))
 
 
 def _pelco_command_ok(p: bytes) -> bool:

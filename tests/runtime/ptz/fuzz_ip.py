@@ -12,7 +12,7 @@ benchmarks/bench_ptz.py ``--only fuzz-ip`` (10,000 each way).
 - :func:`fuzz_port`: datagrams fed to the driver's UDP port (:class:`~runtime.ptz.visca_ip.ViscaIpPort`,
   opened against a RESET-answering socket) and on through the VISCA framing and the driver's dialect
   (what the reader thread runs); the port must hand on only the payloads of replies whose sequence
-  number it sent, and stay usable.
+  number it sent and that are one terminated message each, and stay usable.
 """
 
 from __future__ import annotations
@@ -208,7 +208,7 @@ def fuzz_port(n: int, seed: int, hang_s: float = 0.5) -> dict:
                     hangs += 1
                 d = vip.unframe(data)
                 expected = (d.payload if d is not None and d.payload_type == vip.REPLY and d.seq in port._mine
-                            else b"")
+                            and visca.message(d.payload).error != "unterminated" else b"")
                 if got != expected or before:
                     wrong += 1
                     if len(problems) < 10:

@@ -319,3 +319,19 @@ def test_a_camera_that_falls_silent_is_re_initialised_and_counted_once():
         assert wait_for(lambda: ptz.connected)
         assert ptz.wait_reached(timeout=20)
         assert ptz.counters["reconnects"] == 1 and ptz.counters["errors"] == errors
+
+
+def test_every_transport_shares_one_driver_base():
+    """The plumbing (connect/disconnect, the context manager, the latest target, writes, queries, counters)
+    lives once, in DriverBase: no driver of the URL table repeats it."""
+    from runtime.ptz.base import DriverBase
+    from runtime.ptz.transports import SCHEMES, SERIAL, _load
+
+    shared = ("connect", "disconnect", "__enter__", "__exit__", "connected", "set_target", "target", "sequence",
+              "take_writes", "request_position", "query_position", "reached", "wait_reached", "counters", "stats",
+              "_fail_queries", "_count")
+    drivers = {_load(s.driver) for s in (*SCHEMES.values(), SERIAL)}
+    assert len(drivers) == 2
+    for cls in drivers:
+        assert issubclass(cls, DriverBase), cls
+        assert not set(shared) & set(vars(cls)), (cls, set(shared) & set(vars(cls)))

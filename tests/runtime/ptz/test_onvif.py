@@ -237,3 +237,107 @@ def test_ptz_command_wrong_password_is_one_line_exit_2_and_never_shows_it(capsys
         assert main(["ptz", "--ptz", url, "--pan-deg", "10", "--tilt-deg", "5", "--zoom", "2", "--json"]) == 0
         out = capsys.readouterr().out
         assert '"reached": true' in out and "s3cret" not in out and "admin:***@" in out
+
+
+class BadServer:
+    """An HTTP server on 127.0.0.1 (a port the OS picks) that answers every POST with ``status``,
+    ``content_type`` and ``body``: something at the ONVIF URL that is no ONVIF camera. Stops on leaving."""
+
+    def __init__(self, status: int, content_type: str, body: bytes) -> None:
+        import threading
+        from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+        class Handler(BaseHTTPRequestHandler):
+            def log_message(self, *args):
+                return None
+
+            def do_POST(self):
+                self.rfile.read(int(self.headers.get("Content-Length", 0)))
+                self.send_response(status)
+                self.send_header("Content-Type", content_type)
+                self.send_header("Content-Length", str(len(body)))
+                self.end_headers()
+                try:
+                    self.wfile.write(body)
+                except OSError:  # the client stopped reading (a capped body)
+                    pass
+
+        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.httpd.daemon_threads = True
+        self.url = f"onvif://127.0.0.1:{self.httpd.server_address[1]}"
+        self._thread = threading.Thread(target=self.httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
+
+    def __enter__(self) -> BadServer:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.httpd.shutdown()
+        self.httpd.server_close()
+
+
+BAD_REPLIES = [
+    (500, "text/html", b"<html><body><h1>500 Internal Server Error</h1></body></html>",
+     "GetServices got HTTP 500 (text/html, 60 bytes: '<html><body><h1>500 Internal Server Error</h1></body></html>')"),
+    (200, "application/soap+xml", b"hello, this is not XML", "GetServices got HTTP 200 (application/soap+xml, "
+                                                             "22 bytes: 'hello, this is not XML'): not XML"),
+    (200, "application/soap+xml", b"<s:Envelope><s:Body></s:Envelope>", "malformed reply to GetServices"),
+    (200, "application/soap+xml", b"<a>" + bytes(10 << 20) + b"</a>",
+     "GetServices got HTTP 200 (application/soap+xml): a reply of more than 1024 KiB, not read further"),
+]
+
+
+@pytest.mark.parametrize("status, content_type, body, expect", BAD_REPLIES, ids=["500", "text", "xml", "10MB"])
+def test_what_is_no_onvif_camera_is_one_line_naming_what_came_back(status, content_type, body, expect, caplog):
+    """An HTTP error page, a body that is not XML, malformed XML or 10 MB: connect gives up at the first
+    answer (not after its whole time-out), and its one line says what came back; the body is capped."""
+    caplog.set_level(logging.DEBUG, logger="omnijax.ptz")
+    with BadServer(status, content_type, body) as server:
+        driver = OnvifDriver(server.url, PROFILE)
+        t0 = time.monotonic()
+        with pytest.raises(PtzError) as exc:
+            driver.connect(timeout=60)
+    assert time.monotonic() - t0 < 30
+    assert str(exc.value).startswith(f"{server.url}: not an ONVIF PTZ camera: ") and expect in str(exc.value)
+    assert len(str(exc.value)) < 400 and "\n" not in str(exc.value)
+    assert not [r for r in caplog.records if r.levelno >= logging.WARNING]  # nothing else said meanwhile
+
+
+def test_run_against_an_http_500_is_one_line_and_exit_2(tmp_path):
+    """``omnijax run --ptz onvif://`` to a server answering HTTP 500, as a user runs it: exit 2, one line on
+    stderr formatted like every other (no raw ``WARNING:omnijax.ptz:`` lines from the ONVIF library's
+    logging set-up)."""
+    import subprocess
+    import sys
+
+    import cv2
+    import numpy as np
+
+    from tests.paths import CONFIGS, ROOT
+
+    (tmp_path / "frames").mkdir()
+    cv2.imwrite(str(tmp_path / "frames" / "0.png"), np.zeros((480, 640, 3), np.uint8))
+    status, content_type, body, expect = BAD_REPLIES[0]
+    with BadServer(status, content_type, body) as server:
+        proc = subprocess.run([sys.executable, "-m", "runtime.cli", "run", str(tmp_path / "frames"), "--config",
+                               str(CONFIGS / "paper.toml"), "--ptz", server.url, "--out", str(tmp_path / "out")],
+                              cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2
+    err = proc.stderr.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("omnijax run: error: --ptz: ") and expect in err[0], proc.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_warnings_are_lines_like_every_other_message(capsys, monkeypatch):
+    """Under the command line, a warning reads ``omnijax run: warning: ...``, and a library's own
+    ``logging.basicConfig`` (onvif-zeep-async's, on import) adds no second, raw handler."""
+    from runtime.cli._main import log_lines
+
+    monkeypatch.setattr(logging.getLogger(), "handlers", [])  # a process where nobody configured logging
+    with log_lines("omnijax run"):
+        logging.basicConfig(level=logging.INFO)
+        assert len(logging.getLogger().handlers) == 1
+        logging.getLogger("omnijax.ptz").warning("PTZ link lost on %s: %s; reconnecting", "onvif://h", "gone")
+        logging.getLogger("omnijax.ptz").info("PTZ connected")
+    assert capsys.readouterr().err == "omnijax run: warning: PTZ link lost on onvif://h: gone; reconnecting\n"
+    assert logging.getLogger().handlers == []

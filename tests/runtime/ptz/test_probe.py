@@ -119,3 +119,28 @@ def test_the_loop_adds_the_profiles_command_latency_to_the_slew_time():
     link.sent = (0.0, 0.0, 1.0)
     t = link.slew_time((math.radians(50.0), 0.0, 1.0))
     assert t == pytest.approx(0.25 + 50.0 / link.rates[0])
+
+
+@pytest.mark.parametrize("pan_deg, tilt_deg", [(0.0, 45.0), (60.0, 0.0), (-30.0, 60.0)])
+def test_the_loop_predicts_arrival_at_the_speed_the_driver_commands(pan_deg, tilt_deg):
+    """One source of truth for speed: the emulated EVI-D70, driven by the driver's own pan-tilt packet (tilt
+    speed code 20 of 23: 78 deg/s, not the 90 deg/s top speed), completes when the loop predicts it."""
+    from runtime.ptz import ViscaCamera, default_profile
+    from runtime.ptz.dialect import ViscaDialect
+    from runtime.ptz.visca import ViscaParser, completion
+    from runtime.realtime.ptz_link import PtzLink
+
+    profile = default_profile("visca")
+    assert profile.tilt.move_deg_s() == pytest.approx(90.0 * 20 / 23)
+    target = (math.radians(pan_deg), math.radians(tilt_deg), 1.0)
+    link = PtzLink(0, None, profile)
+    link.sent = (0.0, 0.0, 1.0)
+    predicted = link.slew_time(target)
+    camera = ViscaCamera(profile, now=0.0)
+    (_, _, move), _zoom = ViscaDialect(profile).commands(profile.to_device(*target))
+    for packet in ViscaParser().feed(move.packet):
+        camera.receive(packet, 0.0)
+    t = 0.0
+    while completion(1, 1) not in camera.tick(t):
+        t += 0.001
+    assert t == pytest.approx(predicted, abs=0.002 + 1 / (14.4 * min(profile.move_rates_deg_s())))

@@ -109,3 +109,27 @@ def test_parser_reports_overlong_and_short_packets_then_resynchronises():
     assert got[0].start == 0 and got[0].end == len(overlong)
     assert len(got[0].data) < visca.MAX_PACKET
     assert got[2].data == visca.ack(1, 1)
+
+
+@pytest.mark.parametrize("hex_", ["81 01 ee 77 ff", "81 01 06 99 ff", "81 80 ff"])
+def test_a_body_byte_of_0x80_or_above_stays_in_its_packet(hex_):
+    """A byte >= 0x80 that is no header belongs to the packet (a camera answers it with a syntax error);
+    only a header byte restarts the framing."""
+    data = bytes.fromhex(hex_)
+    (got,) = ViscaParser().feed(data)
+    assert got.data == data and got.error is None and (got.start, got.end) == (0, len(data))
+    with pytest.raises(ViscaError) as exc:
+        visca.decode_command(got.data)
+    assert exc.value.code == ErrorCode.SYNTAX
+    assert [f.data for f in ViscaParser().feed(bytes.fromhex("81 01 99") + visca.ack(1, 1))] == [visca.ack(1, 1)]
+
+
+@pytest.mark.parametrize("hex_,error", [("81 01 ee 77 ff", None), ("81 01", "unterminated"),
+                                        ("81 ff 81 ff", "unterminated"), ("81 ff", "short"),
+                                        ("81" + " 01" * 20 + " ff", "overlong")])
+def test_an_ip_payload_is_one_message(hex_, error):
+    data = bytes.fromhex(hex_)
+    got = visca.message(data)
+    assert got.error == error and (got.start, got.end) == (0, len(data))
+    if error is None:
+        assert got.data == data

@@ -10,12 +10,13 @@ import math
 import socket
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
 
 from runtime.cli import main
-from runtime.ptz import Faults, PtzPortError, UdpEmulator, ViscaCamera, make_driver, visca, visca_ip as vip
+from runtime.ptz import Faults, PtyEmulator, PtzPortError, UdpEmulator, ViscaCamera, make_driver, visca, visca_ip as vip
 from runtime.ptz.packets import Packet
 from tests.paths import ROOT
 from tests.runtime.ptz.helpers import quick_profile, wait_for
@@ -96,10 +97,50 @@ def test_unknown_command_is_a_syntax_error_and_bad_payload_a_message_error():
     assert cam.errors == 3 and cam.camera.errors == 1
 
 
+@pytest.mark.parametrize("hex_", ["81 01 ee 77 ff", "81 01 06 99 ff", "ee 77 ff"])
+def test_a_message_with_a_high_body_byte_is_a_syntax_error_in_a_reply_with_its_number(hex_):
+    cam = _camera()
+    assert cam.receive(vip.frame(vip.COMMAND, 9, bytes.fromhex(hex_)), 0.0) == \
+        [vip.frame(vip.REPLY, 9, bytes.fromhex("90 60 02 ff"))]
+    assert cam.errors == 0 and cam.camera.errors == 1
+
+
 def test_serial_emulator_answers_an_unknown_command_with_a_syntax_error():
     cam = ViscaCamera(quick_profile("visca"), now=0.0)
     data = bytes.fromhex("81 01 06 99 ff")
     assert cam.receive(Packet(data, 0, len(data)), 0.0) == [bytes.fromhex("90 60 02 ff")]
+
+
+@pytest.mark.parametrize("hex_", ["81 01 ee 77 ff", "81 01 06 99 ff"])
+def test_the_serial_emulator_answers_a_high_body_byte_through_its_pty(hex_):
+    """Through the pty and the emulator's own packet reader, as a client's bytes arrive."""
+    import serial
+
+    with PtyEmulator(quick_profile("visca")) as emu, serial.Serial(emu.path, timeout=2) as port:
+        port.write(bytes.fromhex(hex_))
+        assert port.read(4) == bytes.fromhex("90 60 02 ff")
+
+
+def test_the_driver_drops_a_reply_datagram_that_is_not_one_message():
+    counters: dict = {}
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as cam:
+        cam.bind(("127.0.0.1", 0))
+        cam.settimeout(2)
+        threading.Thread(target=_answer_reset, args=(cam,), daemon=True).start()
+        port = vip.ViscaIpPort("127.0.0.1", cam.getsockname()[1], timeout=0.05, ack_timeout_s=2.0, counters=counters)
+        try:
+            port.write(visca.pan_tilt_position_inquiry(1))
+            port._take(vip.frame(vip.REPLY, 1, visca.ack(1, 1) + visca.ack(1, 2)))
+            assert port.in_waiting == 0 and counters["malformed_datagrams"] == 1
+            port._take(vip.frame(vip.REPLY, 1, visca.ack(1, 1)))
+            assert port.read(16) == visca.ack(1, 1)
+        finally:
+            port.close()
+
+
+def _answer_reset(sock: socket.socket) -> None:
+    data, peer = sock.recvfrom(2048)
+    sock.sendto(vip.frame(vip.CONTROL_REPLY, vip.unframe(data).seq, vip.RESET), peer)
 
 
 # -- the driver through UDP ---------------------------------------------------------------
