@@ -131,7 +131,8 @@ class RealTimeLoop:
     called on the drawing thread, with ``dets`` the detections (NumPy), ``z`` the valid detections'
     floor positions (K, 2) m (the demo scores there and the annotated view is drawn there),
     ``tracks`` the tracks confirmed at that frame (copies), ``status`` the loop's counters then
-    (:meth:`status`); it returns extra log fields.
+    (:meth:`status`) and ``status["arrived"]`` the :class:`Command` the PTZ has arrived at and holds
+    on this frame's target (``None`` if it has not); it returns extra log fields.
     ``on_control(record, frame)``: called on the control thread after the send (fault injection
     that must happen at its frame), returning extra log fields; keep it cheap.
     ``driver`` may be ``None`` (no PTZ: commands are computed and logged only). ``operator``: the
@@ -169,6 +170,7 @@ class RealTimeLoop:
         self.sent_at: float | None = None
         self._arrive_at = 0.0
         self._sent_track: int | None = None
+        self._sent_command: Command | None = None
         self._stop = threading.Event()
         self._old_handlers: dict = {}
         self.t_start = time.monotonic()
@@ -334,9 +336,13 @@ class RealTimeLoop:
             slot_of = {tr.id: int(where[tr.detection]) for tr in tracker.tracks if tr.detection is not None}
             self.keeper.update(x, out.dets, out.d2, self.keeper.trusted(tracker.tracks, slot_of, valid.shape[0]))
         self._record("adapt", t)
+        status = self.status()
+        status["arrived"] = self._arrived(command, frame.stamp)
+        if status["arrived"] is not None:
+            record["ptz_arrived"] = True
         self.off_path.submit({"record": record, "frame": frame, "dets": c.dets, "z": z,
                               "tracks": [copy.copy(tr) for tr in confirmed], "command": command,
-                              "status": self.status()})
+                              "status": status})
         elapsed = time.monotonic() - frame.t
         self.timings.frame.append(1e3 * elapsed)
         if self.period and elapsed > self.period:
@@ -359,6 +365,16 @@ class RealTimeLoop:
         if self.sent_at is None or self.sent is None:
             return False
         return stamp >= self._arrive_at
+
+    def _arrived(self, command: Command | None, stamp: float) -> Command | None:
+        """The command the PTZ holds, if it has arrived there (:meth:`_settled`) and it aims at this frame's
+        target (the loop's own pointing, as the demo scores it); ``None`` otherwise (no target, the
+        operator's pointing, a new target or still slewing)."""
+        sent = self._sent_command
+        if (command is None or command.track is None or sent is None or sent.track != command.track
+                or not self._settled(stamp)):
+            return None
+        return sent
 
     def _slew_time(self, target: tuple[float, float, float]) -> float:
         """Seconds the PTZ needs from the last command to ``target``: the device profile's command latency,
@@ -429,6 +445,7 @@ class RealTimeLoop:
         self.sent = (cmd.pan, cmd.tilt, cmd.zoom)
         self.sent_at = time.monotonic()
         self._sent_track = cmd.track
+        self._sent_command = cmd
         self.counts["commands_sent"] += 1
 
     def _collect_writes(self) -> None:
