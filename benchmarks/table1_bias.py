@@ -10,9 +10,8 @@ variant, the person jittered around the position (:func:`runtime.validation.endt
 - ``exact``      ``prior_size`` without jitter, the person at the nominal position (validate's old trials);
 - ``axis_model`` ``table1`` with the detector's foot hypotheses changed (monkeypatched here, not in
                  omnijax): the axis foot ``rho`` (the body's radius) beyond the silhouette's inner end on
-                 the centre line, not ``pi rho / 4``, and that inner end half a sample before the first
-                 sample inside the person: what the person model's fix in ``omnijax/detection/_polar.py``
-                 would give;
+                 the centre line, not ``pi rho / 4``: what the person model's fix in
+                 ``omnijax/detection/_polar.py`` would give;
 - ``axis_prior_size`` ``axis_model`` with the person's H_p and R_h at the prior means (what is left once
                  the height is no longer a mismatch: the detector's height hypothesis).
 
@@ -48,14 +47,13 @@ VARIANTS = ("table1", "prior_size", "no_shadow", "exact", "axis_model", "axis_pr
 
 @jax.jit
 def _axis_tables(rig, radii, theta):
-    """``omnijax.detection._polar._geometry_tables`` with the axis ``rho`` beyond the inner end, which lies
-    half a sample before the sample: the ``axis_model`` variant."""
+    """``omnijax.detection._polar._geometry_tables`` with the axis ``rho`` beyond the inner end, not
+    ``pi rho / 4``: the ``axis_model`` variant."""
     omni = rig.omni
     x, y = omni.to_pixel(radii[None, :], theta[:, None])
     R_floor = floor_radius(radii, omni.r_m, omni.H_o, omni.profile)[0]
-    R_edge = floor_radius(radii - 0.5, omni.r_m, omni.H_o, omni.profile)[0]
     rho = body_radius(rig)
-    R_axis = R_edge + rho
+    R_axis = R_floor + rho
     outer = lambda H_p: person_image_extent(R_axis, omni, H_p, rig.person.R_h, rho)[1]
     r_out, dout_dH = jax.jvp(outer, (rig.person.H_p,), (jnp.ones_like(rig.person.H_p),))
     r_f = point_image_radius(R_axis, 0.0, omni.r_m, omni.H_o, omni.profile)

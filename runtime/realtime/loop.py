@@ -131,8 +131,9 @@ class RealTimeLoop:
     called on the drawing thread, with ``dets`` the detections (NumPy), ``z`` the valid detections'
     floor positions (K, 2) m (the demo scores there and the annotated view is drawn there),
     ``tracks`` the tracks confirmed at that frame (copies), ``status`` the loop's counters then
-    (:meth:`status`) and ``status["arrived"]`` the :class:`Command` the PTZ has arrived at and holds
-    on this frame's target (``None`` if it has not); it returns extra log fields.
+    (:meth:`status`) and ``status["arrived"]`` the :class:`Command` the PTZ holds, arrived, on this
+    frame's target at the frame's time (sent before it; ``None`` if there is none); it returns extra
+    log fields.
     ``on_control(record, frame)``: called on the control thread after the send (fault injection
     that must happen at its frame), returning extra log fields; keep it cheap.
     ``driver`` may be ``None`` (no PTZ: commands are computed and logged only). ``operator``: the
@@ -315,6 +316,7 @@ class RealTimeLoop:
             record["operator"] = "point" if pointing is not None else "paused" if op.paused else "target"
             self.counts["operator_frames"] += 1
         t = self._record("aim", t)
+        arrived = self._arrived(command, frame.stamp)  # what the PTZ holds at the frame's time, before this send
         if command is not None and command.sent:
             self._send(command, frame.stamp)
         t_sent = time.monotonic()
@@ -337,8 +339,8 @@ class RealTimeLoop:
             self.keeper.update(x, out.dets, out.d2, self.keeper.trusted(tracker.tracks, slot_of, valid.shape[0]))
         self._record("adapt", t)
         status = self.status()
-        status["arrived"] = self._arrived(command, frame.stamp)
-        if status["arrived"] is not None:
+        status["arrived"] = arrived
+        if arrived is not None:
             record["ptz_arrived"] = True
         self.off_path.submit({"record": record, "frame": frame, "dets": c.dets, "z": z,
                               "tracks": [copy.copy(tr) for tr in confirmed], "command": command,
@@ -367,9 +369,10 @@ class RealTimeLoop:
         return stamp >= self._arrive_at
 
     def _arrived(self, command: Command | None, stamp: float) -> Command | None:
-        """The command the PTZ holds, if it has arrived there (:meth:`_settled`) and it aims at this frame's
-        target (the loop's own pointing, as the demo scores it); ``None`` otherwise (no target, the
-        operator's pointing, a new target or still slewing)."""
+        """The command the PTZ holds at the frame stamped ``stamp`` (the last one sent before it), if it
+        has arrived there by then (:meth:`_settled`) and it aims at this frame's target (the loop's own
+        pointing, as the demo scores it); ``None`` otherwise (no target, the operator's pointing, a new
+        target or still slewing)."""
         sent = self._sent_command
         if (command is None or command.track is None or sent is None or sent.track != command.track
                 or not self._settled(stamp)):
