@@ -31,6 +31,10 @@ Every processed frame is scored against the world's ground truth: detection
 misses and false alarms, the foot position error on the floor, and for each
 frame with a target whether the true head would be inside the PTZ frame for
 both zoom rules (the paper's and the calibrated one), and its width in pixels;
+for each frame on which the PTZ had arrived at the command it holds on its
+target, the NEES of that pan/tilt against the true head direction under the
+aim's covariance, and whether the head is in the frame at each rule's zoom
+for p_contain 0.9, 0.95, 0.99 (summary.json's pointing);
 the share of target-frames aimed at no person; per person the share of their
 time in view with their face framed by some PTZ (face coverage); per PTZ its
 target-frames, the share framed and its hand-offs (cameras); and the frames with
@@ -265,6 +269,14 @@ def _report(s: dict, out) -> None:
     h = c["held"]
     print(f"  target-frames on no person: {c['no_person_share'] or 0:.4f}; no target with someone in view: "
           f"{h['untrusted']} frames untrusted, {h['unframeable']} unframeable, {h['no_track']} no track")
+    pt = s.get("pointing")
+    if pt and pt["frames"]:
+        by_rule = {rule: "/".join(f"{c['rate']:.3f}" for c in pt["curve"] if c["rule"] == rule)
+                   for rule in dict.fromkeys(c["rule"] for c in pt["curve"])}
+        print(f"  pointing on the {pt['frames']} frames the PTZ had arrived on its target: NEES per dof "
+              f"{pt['nees_mean']:.3f} (1 when the covariance is right), P(NEES > 5.99) {pt['nees_over_5_99']:.3f} "
+              f"(0.05); head in frame at p_contain 0.9/0.95/0.99: "
+              + ", ".join(f"{rule} {rates}" for rule, rates in by_rule.items()))
     fe = s["foot_error_m"]["rms"]
     print(f"  detection: miss rate {d['miss_rate'] or 0:.4f}, false alarms {d['false_alarm_rate'] or 0:.4f} "
           f"of detections; foot error RMS {fe if fe is not None else float('nan'):.3f} m")

@@ -139,8 +139,9 @@ class RealTimeLoop:
     called on the drawing thread, with ``dets`` the detections (NumPy), ``z`` the valid detections'
     floor positions (K, 2) m (the demo scores there and the annotated view is drawn there),
     ``tracks`` the tracks confirmed at that frame (copies), ``commands`` each PTZ's :class:`Command`
-    (``None``: no target), in the rig's order, ``status`` the loop's counters then (:meth:`status`);
-    it returns extra log fields.
+    (``None``: no target), in the rig's order, ``status`` the loop's counters then (:meth:`status`)
+    and ``status["arrived"]`` per PTZ the :class:`Command` it holds, arrived, on its target of this
+    frame at the frame's time (sent before it; ``None`` if there is none); it returns extra log fields.
     ``on_control(record, frame)``: called on the control thread after the send (fault injection
     that must happen at its frame), returning extra log fields; keep it cheap.
     ``links``: one :class:`~runtime.realtime.ptz_link.PtzLink` per PTZ of the rig, in its order (a link
@@ -351,6 +352,8 @@ class RealTimeLoop:
             if command is not None and command.track is not None:
                 self.target_frames[k] += 1
         t = self._record("aim", t)
+        # what each PTZ holds at the frame's time, before this frame's sends
+        arrived = [link.arrived(command, frame.stamp) for link, command in zip(self.links, commands)]
         sent = [k for k, command in enumerate(commands) if command is not None and command.sent]
         for k in sent:
             self.links[k].send(commands[k], frame.stamp, frame.t)
@@ -378,9 +381,13 @@ class RealTimeLoop:
             slot_of = {tr.id: int(where[tr.detection]) for tr in tracker.tracks if tr.detection is not None}
             self.keeper.update(x, out.dets, out.d2, self.keeper.trusted(tracker.tracks, slot_of, valid.shape[0]))
         self._record("adapt", t)
+        status = self.status()
+        status["arrived"] = arrived
+        if any(held is not None for held in arrived):
+            record["ptz_arrived"] = [held is not None for held in arrived] if len(arrived) > 1 else True
         self.off_path.submit({"record": record, "frame": frame, "dets": c.dets, "z": z,
                               "tracks": [copy.copy(tr) for tr in confirmed], "commands": commands,
-                              "status": self.status()})
+                              "status": status})
         elapsed = time.monotonic() - frame.t
         self.timings.frame.append(1e3 * elapsed)
         if self.period and elapsed > self.period:

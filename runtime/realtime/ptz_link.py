@@ -31,6 +31,7 @@ class PtzLink:
         self.sent: tuple[float, float, float] | None = None
         self.sent_at: float | None = None
         self.sent_track: int | None = None
+        self.sent_command = None  # the last Command sent
         #: the frame stamp (s) by which the PTZ should have reached :attr:`sent`
         self.arrive_at = 0.0
         self.commands = 0
@@ -54,6 +55,17 @@ class PtzLink:
         if self.sent_at is None or self.sent is None:
             return False
         return stamp >= self.arrive_at
+
+    def arrived(self, command, stamp: float):
+        """The command this PTZ holds at the frame stamped ``stamp`` (the last one sent before it), if it has
+        arrived there by then (:meth:`settled`) and it aims at ``command``'s target, this frame's (the loop's
+        own pointing, as the demo scores it); ``None`` otherwise (no target, the operator's pointing, a new
+        target or still slewing)."""
+        sent = self.sent_command
+        if (command is None or command.track is None or sent is None or sent.track != command.track
+                or not self.settled(stamp)):
+            return None
+        return sent
 
     def slew_time(self, target: tuple[float, float, float]) -> float:
         """Seconds the PTZ needs from the last command to ``target``: the device profile's command latency,
@@ -79,6 +91,7 @@ class PtzLink:
         self.sent = (cmd.pan, cmd.tilt, cmd.zoom)
         self.sent_at = time.monotonic()
         self.sent_track = cmd.track
+        self.sent_command = cmd
         self.commands += 1
 
     def step_ended(self, t: float) -> None:

@@ -49,13 +49,14 @@ from omnijax import (
     build_detector,
     detect,
     detection_sigmas,
+    floor_radius,
     learn_background,
     line_background,
     point_image_radius,
     pointing,
 )
 from omnijax.detection import Background, Detections, Detector, LineBackground, line_change
-from omnijax.geometry import wrap_2pi, wrap_pi
+from omnijax.geometry import floor_to_image, wrap_2pi, wrap_pi
 from omnijax.world import (
     Scenario,
     World,
@@ -69,9 +70,8 @@ from omnijax.world import (
     walkable,
 )
 from omnijax.zoom import ZOOM_RULES
+from runtime.validation.pointing import P_CONTAIN, nees_summary, pointing_errors
 
-#: Containment is measured at these p_contain, for both zoom rules.
-P_CONTAIN = (0.9, 0.95, 0.99)
 #: Clearance (m) of the positions from walls and excluded zones, and their distance from the PTZ and the omni axis.
 CLEARANCE, NEAR_PTZ, NEAR_AXIS = 0.5, 1.0, 0.6
 
@@ -208,10 +208,12 @@ def prepare(rig: Rig, scenario: Scenario, seed: int = 0, foot_mc_profiles: int |
 
 
 class Matched(eqx.Module):
-    """The detection that covers the person (``found``: one did), per trial."""
+    """The detection that covers the person (``found``: one did), per trial; ``r_in`` the image radius (px)
+    of the inner end the foot hypothesis put the person's silhouette at."""
 
     found: jax.Array
     r_f: jax.Array
+    r_in: jax.Array
     theta_f: jax.Array
     sigma_r_f: jax.Array
     sigma_theta_f: jax.Array
@@ -225,18 +227,20 @@ def match(dets: Detections, theta_true) -> tuple[Matched, jax.Array]:
     off = jnp.abs(wrap_pi(dets.theta_f - theta_true))
     covers = dets.valid & (off <= half + 1e-9)
     k = jnp.argmin(jnp.where(covers, off, jnp.inf))
-    m = Matched(found=covers.any(), r_f=dets.r_f[k], theta_f=dets.theta_f[k], sigma_r_f=dets.sigma_r_f[k],
-                sigma_theta_f=dets.sigma_theta_f[k], contrast=dets.contrast[k])
+    m = Matched(found=covers.any(), r_f=dets.r_f[k], r_in=dets.r_in[k], theta_f=dets.theta_f[k],
+                sigma_r_f=dets.sigma_r_f[k], sigma_theta_f=dets.sigma_theta_f[k], contrast=dets.contrast[k])
     return m, jnp.sum(dets.valid) - covers.any()
 
 
 class Trials(eqx.Module):
     """Trials at one position: the matched detection, the true inputs x (9: r_f, theta_f, H_o, H_f,
-    D_c, theta_c, r_m, H_p, R_h) and the true head, the true rig, and per frame the other valid
-    detections and the radial lines over the lower threshold."""
+    D_c, theta_c, r_m, H_p, R_h), the true silhouette's inner end (``r_inner``, px) and the true head,
+    the true rig, and per frame the other valid detections and the radial lines over the lower
+    threshold."""
 
     det: Matched
     x_true: jax.Array
+    r_inner: jax.Array
     head: jax.Array
     R_h: jax.Array
     true_rig: Rig
@@ -256,23 +260,46 @@ def _truth_inputs(truth, true_rig: Rig):
 
 
 @eqx.filter_jit
-def _fresh_chunk(world: World, detector: Detector, lines, keys, new_rig: bool = True) -> Trials:
-    """One rendered frame per key, each with a fresh person and sensor noise, and (``new_rig``) a
-    fresh true rig."""
-    def one(key):
+def _fresh_chunk(world: World, detector: Detector, lines, keys, feet, new_rig: bool = True) -> Trials:
+    """One rendered frame per key, the person standing at that trial's foot (``feet``, m), each with a
+    fresh person and sensor noise, and (``new_rig``) a fresh true rig."""
+    def one(key, foot):
         k_rig, k_people, k_noise = jax.random.split(key, 3)
         true_rig = draw_true_rig(world.rig, k_rig) if new_rig else world.true_rig
         people = draw_people(world.rig, world.scenario, k_people)
         noise = jax.random.bits(k_noise, (2,), jnp.uint32)
-        w = eqx.tree_at(lambda w: (w.scene.true_rig, w.scene.people, w.scene.noise_key), world,
+        w = eqx.tree_at(lambda w: (w.scene.true_rig, w.scene.people, w.scene.noise_key), at(world, foot),
                         (true_rig, people, noise))
         frame = render_frame(w, 0)
         tr = frame.truth
         det, others, over = _observe(detector, lines, frame.image, tr.theta_f[0])
-        return Trials(det=det, x_true=_truth_inputs(tr, true_rig), head=tr.head[0], R_h=tr.R_h[0],
-                      true_rig=true_rig, others=others, lines_over=over)
+        return Trials(det=det, x_true=_truth_inputs(tr, true_rig), r_inner=tr.r_inner[0], head=tr.head[0],
+                      R_h=tr.R_h[0], true_rig=true_rig, others=others, lines_over=over)
 
-    return jax.vmap(one)(keys)
+    return jax.vmap(one)(keys, feet)
+
+
+@jax.jit
+def _jittered(rig: Rig, foot, key, n_lines):
+    """Feet around ``foot`` (m), one per key: the foot's image radius moved by up to half a pixel and its
+    azimuth by up to half a radial line's spacing (``2 pi / n_lines``), uniformly, either way."""
+    def one(k):
+        u = jax.random.uniform(k, (2,), minval=-0.5, maxval=0.5)
+        r_f, theta = floor_to_image(rig, foot)
+        R, _ = floor_radius(r_f + u[0], rig.omni.r_m, rig.omni.H_o, rig.omni.profile)
+        t = theta + u[1] * 2 * jnp.pi / n_lines
+        return jnp.stack([R * jnp.cos(t), R * jnp.sin(t)])
+
+    return jax.vmap(one)(key)
+
+
+def jittered_feet(rig: Rig, foot, keys, n_lines: int) -> jax.Array:
+    """Table 1's trial positions: the nominal ``foot`` (m) moved, per key, uniformly by up to half a pixel
+    of image radius and half a radial line (``2 pi / n_lines``) of azimuth either way. Over the trials the
+    foot then falls anywhere between the samples of the detector's polar grid, so the grid's quantisation
+    of r_f and theta_f is a random error across trials, as the prediction treats it, not the constant
+    offset it is at one exact position."""
+    return _jittered(rig, jnp.asarray(foot, float), keys, n_lines)
 
 
 @eqx.filter_jit
@@ -303,23 +330,29 @@ def _head(tree, m):
 FRESH = ("noise", "person", "rig")
 
 
-def trials(bench: Bench, foot, n: int, key, fresh: str, chunk: int = 25,
-           progress: Progress | None = None) -> Trials:
+def trials(bench: Bench, foot, n: int, key, fresh: str, chunk: int = 25, jitter: bool = False,
+           progress: Progress | None = None, start: int = 0) -> Trials:
     """``n`` trials with the person standing at ``foot`` (m; :data:`AWAY` for empty frames), each an
     omni frame with fresh sensor noise, detected. ``fresh`` (one of :data:`FRESH`) says what else
     is drawn anew per trial; with ``person`` or ``rig`` every trial renders anew (``chunk`` frames
-    per call); with ``noise`` the frame is rendered once and only exposed per trial (the same
-    frames, faster; ``2 chunk`` per call). Calls are padded to whole chunks: one compilation per size."""
+    per call) and ``jitter`` moves each trial's person around ``foot`` (:func:`jittered_feet`); with
+    ``noise`` the frame is rendered once and only exposed per trial (the same frames, faster; ``2 chunk``
+    per call). Trials are numbered from ``start`` (their keys follow from ``key`` and the number: a
+    second call with ``start = n`` continues the first). Calls are padded to whole chunks: one
+    compilation per size."""
     if fresh not in FRESH:
         raise ValueError(f"fresh must be one of {FRESH}, got {fresh!r}")
     world = at(bench.world, foot)
     parts = []
     if fresh != "noise":
         chunk = min(chunk, n)
-        for i in range(0, n, chunk):
-            m = min(chunk, n - i)
-            parts.append(_head(_fresh_chunk(world, bench.detector, bench.lines, _keys(key, i, chunk),
-                                            fresh == "rig"), m))
+        n_lines = int(bench.detector.polar.n_theta)
+        for i in range(start, start + n, chunk):
+            m = min(chunk, start + n - i)
+            keys = _keys(key, i, chunk)
+            feet = (jittered_feet(bench.rig, foot, jax.vmap(lambda k: jax.random.fold_in(k, 1))(keys), n_lines)
+                    if jitter else jnp.broadcast_to(jnp.asarray(foot, float), (chunk, 2)))
+            parts.append(_head(_fresh_chunk(world, bench.detector, bench.lines, keys, feet, fresh == "rig"), m))
             if progress:
                 progress(m)
         return concat(parts)
@@ -327,15 +360,16 @@ def trials(bench: Bench, foot, n: int, key, fresh: str, chunk: int = 25,
     tr = render_frame(world, 0).truth
     sensor = bench.scenario.sensor
     chunk = min(2 * chunk, n)
-    for i in range(0, n, chunk):
-        m = min(chunk, n - i)
+    for i in range(start, start + n, chunk):
+        m = min(chunk, start + n - i)
         parts.append(_head(_noise_chunk(bench.detector, bench.lines, linear, sensor.noise_sigma,
                                         sensor.jpeg_quality, _keys(key, i, chunk), tr.theta_f[0]), m))
         if progress:
             progress(m)
     det, others, over = concat(parts)
     rep = lambda a: np.broadcast_to(np.asarray(a), (n, *np.shape(a)))
-    return Trials(det=det, x_true=rep(_truth_inputs(tr, world.true_rig)), head=rep(tr.head[0]), R_h=rep(tr.R_h[0]),
+    return Trials(det=det, x_true=rep(_truth_inputs(tr, world.true_rig)), r_inner=rep(tr.r_inner[0]),
+                  head=rep(tr.head[0]), R_h=rep(tr.R_h[0]),
                   true_rig=jax.tree.map(rep, world.true_rig), others=others, lines_over=over)
 
 
@@ -380,19 +414,20 @@ def fixed_rig(rig: Rig) -> Rig:
 
 @jax.jit
 def _pointing_stats(rig: Rig, r_f, theta_f, sigma_r_f, sigma_theta_f):
-    """sin pan, tan tilt and their predicted variances per detection, through the aim pipeline (the
-    sigma rule included)."""
+    """Per detection, through the aim pipeline (the sigma rule included): sin pan, tan tilt and their
+    predicted variances, pan, tilt and their predicted 2 x 2 covariance."""
     def one(r, t, sr, st):
         a = aim_detection(rig, r, t, sr, st)
-        return a.pointing.sin_pan, a.pointing.tan_tilt, a.covariance.var_sin_pan, a.covariance.var_tan_tilt
+        p, c = a.pointing, a.covariance
+        return p.sin_pan, p.tan_tilt, c.var_sin_pan, c.var_tan_tilt, p.pan, p.tilt, c.cov[:2, :2]
 
     return jax.vmap(one)(r_f, theta_f, sigma_r_f, sigma_theta_f)
 
 
 @jax.jit
 def _pointing_stats_given(rig: Rig, r_f, theta_f, sd_r_f, sd_theta_f):
-    """As :func:`_pointing_stats` with the foot's standard deviations taken as given (a measured
-    spread, not a detector's sigmas: no sigma rule)."""
+    """Predicted var(sin pan), var(tan tilt) with the foot's standard deviations taken as given (a
+    measured spread, not a detector's sigmas: no sigma rule)."""
     def one(r, t, sr, st):
         a = aim_from_image(rig, r, t, jnp.diag(jnp.stack([sr**2, st**2])))
         return a.covariance.var_sin_pan, a.covariance.var_tan_tilt
@@ -400,68 +435,197 @@ def _pointing_stats_given(rig: Rig, r_f, theta_f, sd_r_f, sd_theta_f):
     return jax.vmap(one)(r_f, theta_f, sd_r_f, sd_theta_f)
 
 
-def _true_pointing(profile, x_true):
-    p = jax.vmap(lambda x: pointing(x, profile))(jnp.asarray(x_true))
-    return np.asarray(p.sin_pan), np.asarray(p.tan_tilt)
+@jax.jit
+def _true_pointing(rig: Rig, x_true):
+    """sin pan, tan tilt, pan and tilt at the true inputs (the true head direction)."""
+    p = jax.vmap(lambda x: pointing(x, rig.omni.profile))(x_true)
+    return p.sin_pan, p.tan_tilt, p.pan, p.tilt
 
 
-def table_row(rig: Rig, name: str, foot, t: Trials, detection_only: bool) -> dict:
-    """One Table 1 row: predicted (mean over trials) and empirical variances with sampling errors.
+#: Per-detection kernels run on arrays padded to a multiple of this: one compilation for most sizes.
+PAD = 512
 
-    The empirical variance is that of the pointing error (computed from the detection
-    with the configured rig, minus the truth); with the rig and person fixed the truth is
-    fixed and this is the spread of the computed values, the paper's Table 1. Full
-    propagation rows also report the error's mean square (bias included).
-    ``diagnosis`` holds the detector's sigmas (and those the sigma rule hands to the
-    covariance, ``*_used``) against the spread of its errors, and the
-    prediction with the measured detection spread in place of the detector's sigmas
-    (which separates the propagation from the detector's sigma estimates).
+
+def _padded(fn, rig: Rig, *arrays) -> list[np.ndarray]:
+    """``fn(rig, *arrays)`` on the arrays padded (with their first row) to a multiple of :data:`PAD`."""
+    n = len(arrays[0])
+    m = max(PAD, -(-n // PAD) * PAD)
+    pad = [jnp.asarray(np.concatenate([a, np.repeat(a[:1], m - n, 0)])) for a in map(np.asarray, arrays)]
+    return [np.asarray(v)[:n] for v in fn(rig, *pad)]
+
+
+def ratio_of_means(pred, sq) -> tuple[float, float]:
+    """``mean(pred) / mean(sq)`` (predicted variance over measured mean squared error, over paired
+    trials) and its standard error to first order in the two means,
+    ``sqrt(var(pred_i - R sq_i) / n) / mean(sq)``; nan with fewer than 4 trials or no error."""
+    pred, sq = np.asarray(pred, float), np.asarray(sq, float)
+    n = sq.size
+    if n < 4 or not sq.mean() > 0:
+        return float("nan"), float("nan")
+    r = pred.mean() / sq.mean()
+    return float(r), float(np.std(pred - r * sq, ddof=1) / math.sqrt(n) / sq.mean())
+
+
+@dataclass
+class Errors:
+    """Per detected trial: the prediction (through the aim pipeline, sigma rule included) and the error
+    of the pointing computed from the detection with the configured rig, against the truth."""
+
+    pred: dict  # predicted variance by quantity (tan_tilt, sin_pan)
+    err: dict  # computed minus true, by quantity
+    nees: np.ndarray  # of (pan, tilt) under the predicted covariance
+    pan_sq: np.ndarray  # pan's squared error over its predicted variance
+    tilt_sq: np.ndarray
+
+
+def errors(pred_rig: Rig, rig: Rig, t: Trials) -> Errors:
+    """:class:`Errors` of the detected trials of ``t``, predicted with ``pred_rig``'s sigmas."""
+    d = t.det
+    f = np.asarray(d.found, bool)
+    if not f.any():
+        empty = {q: np.zeros(0) for q in QUANTITIES}
+        return Errors(pred=empty, err=empty, nees=np.zeros(0), pan_sq=np.zeros(0), tilt_sq=np.zeros(0))
+    det = [np.asarray(a)[f] for a in (d.r_f, d.theta_f, d.sigma_r_f, d.sigma_theta_f)]
+    sp, tt, vsp, vtt, pan, tilt, cov2 = _padded(_pointing_stats, pred_rig, *det)
+    true_sp, true_tt, true_pan, true_tilt = _padded(_true_pointing, rig, np.asarray(t.x_true)[f])
+    v, pan_sq, tilt_sq = (np.asarray(a) for a in pointing_errors(pan, tilt, cov2, true_pan, true_tilt))
+    return Errors(pred={"tan_tilt": vtt, "sin_pan": vsp}, err={"tan_tilt": tt - true_tt, "sin_pan": sp - true_sp},
+                  nees=v, pan_sq=pan_sq, tilt_sq=tilt_sq)
+
+
+def pointing_report(rig: Rig, fresh: list[Trials]) -> dict:
+    """The report's ``pointing``: over all fresh-rig trials (each one PTZ aimed and arrived at a detected
+    person, as the loop aims), the NEES of (pan, tilt) against the true head direction under the aim's
+    full covariance (calibration, person priors, detection); containment at each p_contain is the
+    report's ``containment.curve``, over the same trials."""
+    ev = [errors(rig, rig, t) for t in fresh]
+    cat = lambda name: np.concatenate([getattr(v, name) for v in ev])
+    return {**nees_summary(cat("nees"), cat("pan_sq"), cat("tilt_sq")),
+            "meaning": "fresh-rig trials: the aimed pan/tilt against the true head direction under the aim's "
+                       "covariance (nees_mean per degree of freedom: 1 when right; nees_over_5_99: 0.05 when "
+                       "right); containment at p_contain 0.9, 0.95, 0.99 over the same trials: containment.curve"}
+
+
+#: Table 1's quantities (eq 13, 14).
+QUANTITIES = ("tan_tilt", "sin_pan")
+
+
+def ratio_rel_se(pred_rig: Rig, rig: Rig, t: Trials) -> float:
+    """The larger relative standard error of the two Table 1 ratios (predicted variance over measured mean
+    squared error) of ``t``: what :func:`table1_trials` stops on."""
+    ev = errors(pred_rig, rig, t)
+    out = []
+    for q in QUANTITIES:
+        r, se = ratio_of_means(ev.pred[q], ev.err[q] ** 2)
+        out.append(se / r if r > 0 else math.inf)
+    return max(out)
+
+
+#: Table 1's sequential sample: at least MIN_TRIALS trials before the standard error is looked at (fewer
+#: estimate it too poorly to stop on), then ROUND_TRIALS more at a time.
+MIN_TRIALS, ROUND_TRIALS = 400, 200
+
+
+def table1_trials(bench: Bench, foot, key, n_max: int, target_rel_se: float | None = None,
+                  fresh: str = "person", progress: Progress | None = None) -> Trials:
+    """Jittered trials at ``foot`` (:func:`trials`, ``jitter``): ``n_max`` of them, or with
+    ``target_rel_se`` as many as put both ratios' relative standard error (:func:`ratio_rel_se`) at
+    most ``target_rel_se`` (checked after :data:`MIN_TRIALS`, then every :data:`ROUND_TRIALS`), at most
+    ``n_max``."""
+    pred_rig = fixed_rig(bench.rig) if fresh == "person" else bench.rig
+    parts, n = [], 0
+    while n < n_max:
+        m = n_max - n if target_rel_se is None else min(MIN_TRIALS if not n else ROUND_TRIALS, n_max - n)
+        parts.append(trials(bench, foot, m, key, fresh, jitter=True, progress=progress, start=n))
+        n += m
+        if target_rel_se is not None and ratio_rel_se(pred_rig, bench.rig, concat(parts)) <= target_rel_se:
+            break
+    return concat(parts)
+
+
+def _position(rig: Rig, name: str, foot, t: Trials) -> dict:
+    fo = rig.foveal
+    f = np.asarray(t.det.found, bool)
+    return {"position": name, "foot_m": [float(v) for v in foot], "trials": int(f.sum()), "missed": int((~f).sum()),
+            "distance_to_ptz_m": float(np.hypot(foot[0] - fo.D_c * np.cos(fo.theta_c),
+                                                foot[1] - fo.D_c * np.sin(fo.theta_c)))}
+
+
+def table_row(rig: Rig, name: str, foot, t: Trials, detection_only: bool, paper: Trials | None = None) -> dict:
+    """One Table 1 row from jittered trials ``t`` (:func:`table1_trials`).
+
+    ``pred_var_*`` is the mean over the trials of the predicted variance (calibration sigmas zero for
+    ``detection_only``: one fixed rig); ``emp_var_*`` the measured mean squared error of the pointing
+    (computed from the detection with the configured rig, minus the truth) about the truth, bias
+    included: what the predicted variance claims to describe; ``ratio_*`` predicted over measured with
+    its standard error (:func:`ratio_of_means`); ``bias_*`` and ``spread_var_*`` (the variance about the
+    errors' mean) split the measured one. ``pointing``: the NEES of (pan, tilt) under the predicted
+    covariance (:mod:`runtime.validation.pointing`). ``paper_fixed_position`` (from ``paper``: trials
+    at the exact position, no jitter): the paper's Table 1 as it was measured, the variance of the
+    pointing about its own mean, for comparison with the paper only (at one exact position the polar
+    grid's quantisation is a constant offset, which a variance cannot see).
+    ``diagnosis`` holds the detector's sigmas (and those the sigma rule hands to the covariance,
+    ``*_used``) against its errors about the truth; the r_f error split into the inner end's (the
+    detector's ``r_in`` against the true silhouette's ``r_inner``) and the person model's (the foot
+    hypothesis's offset from inner end to axis foot against the true one); and the prediction with the
+    measured root mean square errors in place of the detector's sigmas (which checks the propagation
+    on its own).
     """
     d = t.det
     f = np.asarray(d.found, bool)
-    r_f, th, s_r, s_th = (np.asarray(a)[f] for a in (d.r_f, d.theta_f, d.sigma_r_f, d.sigma_theta_f))
-    x_true = np.asarray(t.x_true)[f]
+    r_f, th, s_r, s_th, r_in = (np.asarray(a)[f] for a in (d.r_f, d.theta_f, d.sigma_r_f, d.sigma_theta_f, d.r_in))
+    x_true, r_inner = np.asarray(t.x_true)[f], np.asarray(t.r_inner)[f]
     pred_rig = fixed_rig(rig) if detection_only else rig
-    sp, tt, vsp, vtt = (np.asarray(a) for a in _pointing_stats(pred_rig, *map(jnp.asarray, (r_f, th, s_r, s_th))))
-    true_sp, true_tt = _true_pointing(rig.omni.profile, x_true)
-    e_r, e_th = r_f - x_true[:, 0], wrap_pi(th - x_true[:, 1])
-    if detection_only:  # the trial-to-trial spread of the detection
-        alt_r, alt_th = np.full_like(r_f, np.std(r_f, ddof=1)), np.full_like(th, np.std(np.asarray(e_th), ddof=1))
-    else:  # its error about the truth, bias included
-        alt_r = np.full_like(r_f, np.sqrt(np.mean(e_r**2)))
-        alt_th = np.full_like(th, np.sqrt(np.mean(np.asarray(e_th) ** 2)))
-    alt = _pointing_stats_given(pred_rig, *map(jnp.asarray, (r_f, th, alt_r, alt_th)))
-    alt_sp, alt_tt = (np.asarray(a) for a in alt)
-    fo = rig.foveal
-    row = {"position": name, "foot_m": [float(v) for v in foot], "trials": int(f.sum()), "missed": int((~f).sum()),
-           "distance_to_ptz_m": float(np.hypot(foot[0] - fo.D_c * np.cos(fo.theta_c),
-                                               foot[1] - fo.D_c * np.sin(fo.theta_c)))}
-    for q, val, true, pred, alt in (("tan_tilt", tt, true_tt, vtt, alt_tt), ("sin_pan", sp, true_sp, vsp, alt_sp)):
-        err = val - true
-        emp, se = sample_variance(err)
-        p = float(np.mean(pred))
-        row[f"pred_var_{q}"] = p
-        row[f"emp_var_{q}"] = emp
-        row[f"emp_var_{q}_se"] = se
-        row[f"ratio_{q}"] = p / emp if emp > 0 else None
-        row[f"ratio_{q}_se"] = p * se / emp**2 if emp > 0 else None
+    ev = errors(pred_rig, rig, t)
+    e_r, e_th = r_f - x_true[:, 0], np.asarray(wrap_pi(th - x_true[:, 1]))
+    rms_r, rms_th = (np.full_like(r_f, np.sqrt(np.mean(v**2))) for v in (e_r, e_th))
+    alt = dict(zip(("sin_pan", "tan_tilt"), _padded(_pointing_stats_given, pred_rig, r_f, th, rms_r, rms_th)))
+    row = _position(rig, name, foot, t)
+    for q in QUANTITIES:
+        err, pred = ev.err[q], ev.pred[q]
+        mse, mse_se = sample_variance(err, about_zero=True)
+        ratio, ratio_se = ratio_of_means(pred, err**2)
+        row[f"pred_var_{q}"] = float(np.mean(pred))
+        row[f"emp_var_{q}"] = mse
+        row[f"emp_var_{q}_se"] = mse_se
+        row[f"ratio_{q}"] = ratio if ratio == ratio else None
+        row[f"ratio_{q}_se"] = ratio_se if ratio == ratio else None
         row[f"bias_{q}"] = float(err.mean())
-        row[f"pred_var_{q}_measured_detection_sigma"] = float(np.mean(alt))
-        if not detection_only:
-            ms, ms_se = sample_variance(err, about_zero=True)
-            row[f"emp_mse_{q}"] = ms
-            row[f"emp_mse_{q}_se"] = ms_se
-            row[f"ratio_mse_{q}"] = p / ms if ms > 0 else None
+        row[f"spread_var_{q}"] = sample_variance(err)[0]
+        row[f"pred_var_{q}_measured_detection_sigma"] = float(np.mean(alt[q]))
+    row["pointing"] = nees_summary(ev.nees, ev.pan_sq, ev.tilt_sq)
+    if paper is not None:
+        row["paper_fixed_position"] = _fixed_position(pred_rig, rig, paper)
     used_r, used_th = (np.asarray(a) for a in detection_sigmas(rig, jnp.asarray(s_r), jnp.asarray(s_th)))
     row["diagnosis"] = {
         "sigma_r_f_px": float(np.mean(s_r)), "sigma_r_f_used_px": float(np.mean(used_r)),
-        "sigma_theta_f_used_rad": float(np.mean(used_th)), "r_f_sd_px": float(np.std(r_f, ddof=1)),
+        "sigma_theta_f_used_rad": float(np.mean(used_th)), "r_f_sd_px": float(np.std(e_r, ddof=1)),
         "r_f_error_rms_px": float(np.sqrt(np.mean(e_r**2))), "r_f_bias_px": float(np.mean(e_r)),
-        "sigma_theta_f_rad": float(np.mean(s_th)), "theta_f_sd_rad": float(np.std(np.asarray(e_th), ddof=1)),
-        "theta_f_error_rms_rad": float(np.sqrt(np.mean(np.asarray(e_th) ** 2))),
+        "r_f_bias_se_px": float(np.std(e_r, ddof=1) / math.sqrt(e_r.size)),
+        "r_in_bias_px": float(np.mean(r_in - r_inner)),
+        "foot_model_offset_bias_px": float(np.mean((r_f - r_in) - (x_true[:, 0] - r_inner))),
+        "sigma_theta_f_rad": float(np.mean(s_th)), "theta_f_sd_rad": float(np.std(e_th, ddof=1)),
+        "theta_f_error_rms_rad": float(np.sqrt(np.mean(e_th**2))), "theta_f_bias_rad": float(np.mean(e_th)),
         "contrast_median": float(np.median(np.asarray(d.contrast)[f])),
     }
     return row
+
+
+def _fixed_position(pred_rig: Rig, rig: Rig, t: Trials) -> dict:
+    """The paper's Table 1 at one exact position: the variance of the pointing error about its mean
+    against the mean predicted variance, the ratio's standard error from the variance's
+    (:func:`sample_variance`)."""
+    ev = errors(pred_rig, rig, t)
+    out = {"trials": int(np.asarray(t.det.found).sum()),
+           "meaning": "the person at the exact position in every trial, the variance about the errors' own mean "
+                      "(the paper's Table 1); for comparison with the paper only"}
+    for q in QUANTITIES:
+        var, se = sample_variance(ev.err[q])
+        p = float(np.mean(ev.pred[q])) if ev.pred[q].size else float("nan")
+        ok = var > 0
+        out |= {f"pred_var_{q}": p, f"emp_var_{q}": var, f"emp_var_{q}_se": se,
+                f"ratio_{q}": p / var if ok else None, f"ratio_{q}_se": p * se / var**2 if ok else None}
+    return out
 
 
 @jax.jit
@@ -542,7 +706,8 @@ def rates(rig: Rig, detector: Detector, empty: Trials, people: list[Trials]) -> 
         "false_alarm_interval": [fa["lower"], fa["upper"]],
         "x_m": float(rig.detection.x_m), "miss_rate": miss["rate"], "miss_interval": [miss["lower"], miss["upper"]],
         "false_alarm_meaning": "share of radial lines of empty frames whose sum M exceeds the lower threshold (eq 10)",
-        "miss_meaning": "share of person trials (Table 1, both variants) with no valid sector covering the person",
+        "miss_meaning": "share of person trials (Table 1: jittered, exact position, fresh rig) with no valid sector "
+                        "covering the person",
         "false_alarm_lines": fa, "misses": miss,
         "empty_frames_with_detection": binomial(int((np.asarray(empty.others) > 0).sum()), over.size),
         "predicted_frames_with_detection": float(detector.thresholds.seed_false_alarm),

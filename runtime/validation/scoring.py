@@ -31,7 +31,15 @@ Per processed frame (an ``on_frame`` hook of :class:`~runtime.loop.RealTimeLoop`
 - per PTZ (``cameras``): its target-frames, the share of them with the head framed
   (``framed_rate``, the driving rule's; ``rules`` has both), those aimed at no person, the median face.
 
-Trials are scored in batches of :data:`BATCH` and only counts and histograms are kept, so the
+- the loop's own pointing (``pointing``): every frame on which the PTZ has arrived at the command
+  it holds on the frame's target (``status["arrived"]`` of :class:`~runtime.realtime.loop.RealTimeLoop`)
+  is one trial: the NEES of the held pan/tilt against the true head direction of the targeted person
+  (the true person nearest the target track, within ``gate_m``) at the frame's time, under the
+  held aim's covariance (:mod:`runtime.validation.pointing`), and whether the head is in the frame
+  at the zoom each rule chooses from that covariance for p_contain 0.9, 0.95, 0.99 (``curve``).
+  Frames arrived on a track matching no person are counted (``no_person``), not scored.
+
+Trials are scored in batches of :data:`BATCH` and only counts, sums and histograms are kept, so the
 memory stays flat however long the demo runs.
 """
 
@@ -45,6 +53,14 @@ import numpy as np
 from omnijax.world import head_in_view
 from omnijax.zoom import ZOOM_RULES as RULES
 from runtime.validation.perception import match_feet
+from runtime.validation.pointing import (
+    NEES_95_2DOF,
+    P_CONTAIN,
+    containment_at,
+    head_direction,
+    nees_summary,
+    pointing_errors,
+)
 
 #: Trials scored at once (one compiled shape); face widths are histogrammed in 1 px bins up to FACE_MAX.
 BATCH, FACE_MAX = 256, 4096
@@ -57,6 +73,17 @@ def _trials(true_rig, pan, tilt, zoom, head, R_h):  # true_rig: one PTZ's
         v = jax.vmap(lambda zz: head_in_view(true_rig, p, t, zz, h, r))(z)
         return v.inside, v.face_px
     return jax.vmap(one)(pan, tilt, zoom, head, R_h)
+
+
+@eqx.filter_jit
+def _pointing_trials(rig, true_rig, pan, tilt, cov4, distance, slant, foot, H_p, R_h):
+    """Per arrived frame (n,): NEES, each axis's squared error over its variance, and containment (n, p, rule)."""
+    pan_true, tilt_true = head_direction(true_rig, foot, H_p, R_h)
+    errors = pointing_errors(pan, tilt, cov4[:, :2, :2], pan_true, tilt_true)
+    head = jnp.concatenate([foot, (H_p - R_h)[:, None]], -1)
+    inside = jax.vmap(lambda *a: containment_at(rig, true_rig, *a, jnp.asarray(P_CONTAIN)))(
+        pan, tilt, cov4, distance, slant, head, R_h)
+    return (*errors, inside)
 
 
 class DemoScorer:
@@ -92,8 +119,15 @@ class DemoScorer:
         self.person_frames = 0  # frames with someone in the image
         self.held = {"untrusted": 0, "unframeable": 0, "no_track": 0}  # of those, frames without a target
         self.last_target_error: float | None = None
+        self.H_p = np.asarray(world.people.H_p)
+        self.rigs = [world.rig.ptz(k) for k in range(K)]
+        self.arrived: list[list[tuple]] = [[] for _ in range(K)]  # per PTZ, arrived frames waiting to be scored
+        self.arrived_no_person = 0
+        self.nees_sums = np.zeros(5)  # frames, NEES, NEES^2, pan's and tilt's squared error over variance
+        self.nees_over = 0
+        self.arrived_inside = np.zeros((len(P_CONTAIN), len(RULES)), int)
 
-    def __call__(self, record, frame, dets, z, tracks, commands, *_) -> dict:
+    def __call__(self, record, frame, dets, z, tracks, commands, status=None, *_) -> dict:
         truth = self.source.take_truth(frame.index)
         if truth is None:
             return {}
@@ -128,6 +162,62 @@ class DemoScorer:
             out["truth"]["target_error_m"] = self.last_target_error
         elif len(commands) > 1:
             out["truth"]["target_people"] = people
+        for k, held in enumerate((status or {}).get("arrived") or ()):
+            if held is not None and held.aimed is not None:
+                self._add_arrived(frame.index, k, held, tracks)
+        return out
+
+    def _add_arrived(self, index: int, camera: int, held, tracks) -> None:
+        """One frame on which PTZ ``camera`` holds ``held`` on its target: queued for :meth:`_score_arrived`."""
+        xy = next((tr.position for tr in tracks if tr.id == held.track), None)
+        pos = self.positions[min(index, len(self.positions) - 1)]
+        d = np.linalg.norm(pos - xy, axis=-1) if xy is not None else np.zeros(0)
+        if not d.size or d.min() > self.gate_m:
+            self.arrived_no_person += 1
+            return
+        k = int(np.argmin(d))
+        a = held.aimed
+        queue = self.arrived[camera]
+        queue.append((held.pan, held.tilt, np.asarray(a.covariance.cov), float(a.pointing.distance),
+                      float(a.pointing.slant), pos[k], self.H_p[k], self.R_h[k]))
+        if len(queue) == BATCH:
+            self._score_arrived(camera)
+
+    def _score_arrived(self, camera: int) -> None:
+        queue = self.arrived[camera]
+        n = len(queue)
+        if not n:
+            return
+        pad = queue + [queue[-1]] * (BATCH - n)
+        cols = [jnp.asarray(np.array(v, float)) for v in zip(*pad)]
+        out = [np.asarray(a)[:n] for a in _pointing_trials(self.rigs[camera], self.true_rigs[camera], *cols)]
+        v, pan_sq, tilt_sq, inside = out
+        self.nees_sums += [n, v.sum(), (v * v).sum(), pan_sq.sum(), tilt_sq.sum()]
+        self.nees_over += int((v > NEES_95_2DOF).sum())
+        self.arrived_inside += inside.sum(0)
+        queue.clear()
+
+    def pointing(self) -> dict:
+        """``summary.json``'s ``pointing``: the NEES of the held pointing on the arrived frames of every PTZ
+        (see the module docstring), and the containment ``curve`` there."""
+        for camera in range(len(self.arrived)):
+            self._score_arrived(camera)
+        n, s1, s2, sp, st = self.nees_sums
+        n = int(n)
+        out = nees_summary(np.zeros(0))
+        if n:
+            out.update(nees_mean=s1 / n / 2, nees_over_5_99=self.nees_over / n, pan_nees_mean=sp / n,
+                       tilt_nees_mean=st / n)
+            if n > 1:
+                out["nees_mean_se"] = float(np.sqrt(max(s2 - s1 * s1 / n, 0.0) / (n - 1) / n) / 2)
+        out.update(frames=n, no_person=self.arrived_no_person,
+                   curve=[{"rule": rule, "p_contain": p, "rate": self.arrived_inside[i, j] / n if n else None,
+                           "trials": n} for j, rule in enumerate(RULES) for i, p in enumerate(P_CONTAIN)],
+                   meaning="frames on which a PTZ had arrived at the command it held on its target: the held "
+                           "pan/tilt against the true head direction at the frame's time, under the held aim's "
+                           "covariance; nees_mean per degree of freedom (1 when the covariance is right), "
+                           "nees_over_5_99 the share above chi-square(2)'s 95 % point (0.05 when right); curve: "
+                           "the head in the frame at each rule's zoom for each p_contain from that covariance")
         return out
 
     def _add_trial(self, index: int, camera: int, command, tracks) -> int | None:
@@ -243,7 +333,7 @@ class DemoScorer:
             cont["rate_person_frames"] = cont["rules"][rule]["rate_person_frames"]
             face["median"] = face["rules"][rule]["median"]
         return {"detection": det, "foot_error_m": foot, "containment": cont, "face_px": face,
-                "face_coverage": self._coverage(rule), "cameras": self._cameras(rule)}
+                "face_coverage": self._coverage(rule), "cameras": self._cameras(rule), "pointing": self.pointing()}
 
     def _cameras(self, rule: str) -> list[dict]:
         """Per PTZ: ``id``, ``target_frames``, ``framed_rate`` (``rule``'s, over its target-frames), ``rules``

@@ -72,7 +72,8 @@ def test_help_lists_every_command(capsys):
         assert cmd in out
 
 
-TABLE1_ROW = {"position", "pred_var_tan_tilt", "emp_var_tan_tilt", "pred_var_sin_pan", "emp_var_sin_pan", "trials"}
+TABLE1_ROW = {"position", "pred_var_tan_tilt", "emp_var_tan_tilt", "pred_var_sin_pan", "emp_var_sin_pan", "trials",
+              "ratio_tan_tilt", "ratio_tan_tilt_se", "ratio_sin_pan", "ratio_sin_pan_se"}
 
 
 @pytest.mark.slow
@@ -80,8 +81,9 @@ def test_validate_quick_writes_report_and_maps(tmp_path):
     # as a user runs it: a separate process (the world's renderer is type-checked by its own tests)
     out = tmp_path / "val"
     run = subprocess.run([sys.executable, "-m", "runtime.cli", "validate", "--config", PAPER, "--out", str(out),
-                          "--quick", "--grid-step-px", "24", "--trials", "8", "--fresh-trials", "8",
-                          "--empty-frames", "8"], capture_output=True, text=True, cwd=ROOT, timeout=900)
+                          "--quick", "--grid-step-px", "24", "--trials", "8", "--paper-trials", "8",
+                          "--fresh-trials", "8", "--empty-frames", "8"],
+                         capture_output=True, text=True, cwd=ROOT, timeout=900)
     assert run.returncode == 0, run.stderr[-2000:]
     assert "containment:" in run.stdout
     rep = json.loads((out / "report.json").read_text())
@@ -90,6 +92,10 @@ def test_validate_quick_writes_report_and_maps(tmp_path):
         for row in rep[name]:
             assert set(row) >= TABLE1_ROW and row["trials"] + row["missed"] == 8
             assert row["pred_var_tan_tilt"] > 0 and row["emp_var_tan_tilt"] >= 0
+    for row in rep["table1"]:  # the paper's own measure beside it, labelled
+        assert row["paper_fixed_position"]["trials"] <= 8 and row["paper_fixed_position"]["emp_var_sin_pan"] >= 0
+    assert set(rep["pointing"]) >= {"nees_mean", "nees_over_5_99", "frames"} and rep["pointing"]["frames"] > 0
+    assert "+-" in run.stdout.split("table1 (")[1].splitlines()[1]  # each ratio printed with its standard error
     assert set(rep["rates"]) >= {"x_f", "false_alarm_rate", "x_m", "miss_rate"}
     assert 0 <= rep["rates"]["false_alarm_rate"] <= 1 and 0 <= rep["rates"]["miss_rate"] <= 1
     assert set(rep["containment"]) >= {"p_contain", "rule", "rate", "trials"}

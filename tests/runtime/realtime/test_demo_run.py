@@ -122,6 +122,11 @@ def test_demo_contract(demo_out):
         assert framed == c["rules"][rule]["contained"], rule  # every framed target-frame is one person's
         assert s["face_px"]["rules"][rule]["median"] > 0
     assert {"held_untrusted", "held_unframeable"} <= set(s["counts"]) and "trust" in s["config"]
+    # the loop's own pointing on the frames the PTZ had arrived on its target (docs/design.md section 7)
+    pt = s["pointing"]
+    assert pt["frames"] > 0 and pt["nees_mean"] > 0 and 0 <= pt["nees_over_5_99"] <= 1
+    assert {(c["rule"], c["p_contain"]) for c in pt["curve"]} == {(r, p) for r in ("paper", "calibrated")
+                                                                 for p in (0.9, 0.95, 0.99)}
     assert s["ptz_homed"] and s["emulator"]["pan_deg"] == 0 and s["emulator"]["zoom"] == 1
     log = [json.loads(line) for line in (demo_out / "log.jsonl").read_text().splitlines()]
     assert len(log) == s["frames"] + s["counts"]["broken"] + s["counts"]["wrong_size"]
