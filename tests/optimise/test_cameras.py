@@ -92,6 +92,7 @@ def _layouts(v) -> Layout:
     return Layout(D_c=v[:, 0], H_f=v[:, 1], theta_c=v[:, 2], H_o=jnp.full(v.shape[0], 2.7))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("objective,statistic", [("face_px", "mean"), ("variance", "worst")])
 def test_one_camera_is_the_one_camera_objective(small, objective, statistic):
     rig, fl, X, Y, live, _ = small
@@ -112,6 +113,7 @@ def _with(rig, objective, statistic):
     return dataclasses.replace(rig, layout=dataclasses.replace(rig.layout, objective=objective, statistic=statistic))
 
 
+@pytest.mark.slow
 def test_best_camera_is_the_best_served_value(small):
     rig, fl, X, Y, live, two = small
     fv = camera_values(two, _layouts(jnp.array([3.0, 2.0, 0.0, 4.5, 2.0, math.pi])), X, Y, fl.step, live)

@@ -115,6 +115,7 @@ def _unshadowed(bg, world, t):
     return np.asarray(bg.colour * (sched.ambient[t] + lamps)[..., None])
 
 
+@pytest.mark.slow
 def test_moved_chair_switches_the_static_view_at_its_time(chair):
     """chair_moved (the chair moves 1.5 m at 8 s = frame 200): the pixels where the room's depth differs
     between the two arrangements (the chair at either place) show the first arrangement up to frame
@@ -154,6 +155,7 @@ def test_people_keep_clear_of_both_places_of_the_chair():
     assert np.asarray(world.paths.moving).mean() > 0.5
 
 
+@pytest.mark.slow
 def test_moved_furniture_is_reported(chair):
     """``world.moved_furniture`` and world.json give the chair's footprint centres at both places."""
     np.testing.assert_allclose(chair.moved_furniture, [[0.85, 1.05], [-0.65, 1.05]])

@@ -45,6 +45,7 @@ def _noiseless(rig):
 # --------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_readings_match_plain_world_geometry(paper_rig):
     """Simulated pan/tilt readings against pan/tilt computed from world points with vectors.
 
@@ -74,6 +75,7 @@ def test_readings_match_plain_world_geometry(paper_rig):
     np.testing.assert_allclose(np.asarray(o.tilt), tilt + tilt0, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_levenberg_marquardt_recovers_a_noiseless_rig(paper_rig):
     rig, settings = _noiseless(paper_rig)
     problem, truth, _ = simulate_calibration(jax.random.key(11), rig, settings, 6)
@@ -110,6 +112,7 @@ def test_nees_over_many_runs(paper_rig):
             assert 0.85 < res["nees_mean"][name] < 1.15, (K, name, res["nees_mean"])
 
 
+@pytest.mark.slow
 def test_marks_at_one_height_leave_the_scale_undetermined(paper_rig):
     """H_o, D_c and h - H_f scale together: the Jacobian is singular and check_fit says so."""
     problem, _, _ = simulate_calibration(jax.random.key(3), paper_rig, _settings(paper_rig, heights=(1.5,)), 8)

@@ -45,6 +45,7 @@ def test_render_writes_video_truth_and_world(tmp_path, capsys, six_world):
     assert not list(tmp_path.glob(".r.partial*"))
 
 
+@pytest.mark.slow
 def test_render_by_name_records_moved_furniture_and_lamp_spectra(tmp_path, capsys):
     """A scenario named without its path; ``--seed`` overrides the file's; world.json lists the moved
     chair (both footprint centres, the time) and every lamp's spectrum."""

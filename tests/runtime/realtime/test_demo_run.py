@@ -181,6 +181,7 @@ def test_run_on_a_video_with_the_emulator_stops_cleanly_on_sigterm(demo_out, tmp
     assert all(0 <= r["wait_ms"] <= r["age_ms"] for r in log)
 
 
+@pytest.mark.slow
 def test_a_second_signal_while_writing_keeps_what_was_recorded(demo_out, tmp_path):
     """SIGINT then SIGTERM at once (a second Ctrl-C while ``run`` writes its outputs): the loop stops at the
     first, the second cuts the finishing short (no more drawing, no wait for the PTZ to get home), and what
