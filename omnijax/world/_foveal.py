@@ -24,7 +24,7 @@ from ..config import Rig
 from ..zoom import face_pixels
 from ._noise import derive_key
 from ._people import blocks, body, body_albedo, hit_body, shadow_rays
-from ._scene import albedo, f32, intersect_room, lamp_irradiance, lit, xyz
+from ._scene import albedo, f32, intersect_room, lamp_irradiance, lit, on_screen, xyz
 from ._sensor import expose
 
 #: Rows of the foveal image cast at once (bounds memory).
@@ -117,7 +117,8 @@ def foveal_head(world, t, person: int, pan, tilt, zoom) -> HeadView:
 
 @eqx.filter_jit
 def _foveal_rows(scene, view: PTZView, state, row0, n_rows: int):
-    """Noise-free grey levels of ``n_rows`` rows of the foveal image."""
+    """Noise-free grey levels of ``n_rows`` rows of the foveal image (the self-lit screens' light
+    where nobody stands in front of them)."""
     W, _ = view.size
     y, x = jnp.meshgrid(row0 + jnp.arange(n_rows), jnp.arange(W), indexing="ij")
     v = f32(view)
@@ -129,6 +130,10 @@ def _foveal_rows(scene, view: PTZView, state, row0, n_rows: int):
     weight, ambient = bg.light_weights(state.lamp_light), jnp.stack(bg.ambient_light(state.ambient))
     room_hit = intersect_room(room, eye, d)
     surface_alb = albedo(room, room_hit)
+    screen = on_screen(scene.scenario.screens, room_hit)  # the screens emit, added after the spectrum below
+    glow = jnp.sum(screen[..., None] * f32(state.screen), axis=-2)
+    if screen.shape[-1]:
+        surface_alb = surface_alb * (1.0 - jnp.max(screen, axis=-1))[..., None]
     e = lamp_irradiance(room, room_hit.point, room_hit.normal, bg.lamps, bg.intensity)
     foot = f32(state.foot)
     start = room_hit.point + 1e-3 * room_hit.normal
@@ -149,7 +154,7 @@ def _foveal_rows(scene, view: PTZView, state, row0, n_rows: int):
         light = ambient + jnp.stack(lit(p, (hit.nx, hit.ny, hit.nz), bg.lamps, bg.intensity, weight), axis=-1)
         colour = jnp.where(nearer[..., None], alb * light, colour)
         depth = jnp.where(nearer, hit.t, depth)
-    return colour * bg.spectrum
+    return colour * bg.spectrum + jnp.where((depth == room_hit.t)[..., None], glow, 0.0)
 
 
 def render_foveal(world, t: int, pan, tilt, zoom, size: tuple[int, int] | None = None,

@@ -36,7 +36,8 @@ from ..camera import OmniCamera
 from ..geometry import world_to_image
 from ._image import own_buffer, upsample
 from ._people import People, ShadowRays, blocks, body, body_albedo, body_distance, hit_body, shadow_rays
-from ._scene import Room3D, albedo, f32, intersect_room, lamp_irradiance, lit
+from ._scenario import Screens
+from ._scene import Room3D, albedo, f32, intersect_room, lamp_irradiance, lit, on_screen
 
 #: Rays per pixel (per axis) of the static background.
 BACKGROUND_SAMPLES = 3
@@ -66,7 +67,9 @@ class OmniBackground(eqx.Module):
     per pixel; sample, component, row, column); ``shadow`` the segments from the coarse
     grid's surface points (cells inside the image circle only, packed) to each lamp,
     ``shadow_irradiance`` each lamp's mean irradiance over those cells, and
-    ``shadow_index`` the packed index of each grid cell (``n`` outside the circle).
+    ``shadow_index`` the packed index of each grid cell (``n`` outside the circle);
+    ``screen_cover`` the share of each pixel's samples on each self-lit screen, times
+    ``gain`` (the screens' albedo counts as zero in ``colour``: they emit instead).
 
     Spectra: when every lamp has the ambient light's spectrum, ``spectrum`` is that
     spectrum (folded into ``colour``) and ``lamp_spectrum`` and ``ambient_spectrum`` are
@@ -79,6 +82,7 @@ class OmniBackground(eqx.Module):
     irradiance: Float[Array, "k H W"]
     depth: Float[Array, "H W"]
     gain: Float[Array, "H W"]
+    screen_cover: Float[Array, "screens H W"]
     rays: Float[Array, "s 3 H W"]
     shadow: ShadowRays
     shadow_irradiance: Float[Array, "k n"]
@@ -116,8 +120,9 @@ def _sample_offsets(n: int) -> np.ndarray:
     return (np.arange(n) + 0.5) / n - 0.5
 
 
-def _background_rows(omni, room: Room3D, lamps, intensity, vignetting, row0, n_rows: int, width: int):
-    """Colour, irradiance, depth and gain of ``n_rows`` image rows starting at ``row0``."""
+def _background_rows(omni, room: Room3D, screens: Screens, lamps, intensity, vignetting, row0, n_rows: int,
+                     width: int):
+    """Colour, irradiance, depth, gain and screen cover of ``n_rows`` image rows starting at ``row0``."""
     n = BACKGROUND_SAMPLES
     off = jnp.asarray(_sample_offsets(n))
     y = (row0 + jnp.arange(n_rows))[:, None, None, None] + off[None, :, None, None]
@@ -131,13 +136,17 @@ def _background_rows(omni, room: Room3D, lamps, intensity, vignetting, row0, n_r
     w = inside.astype(jnp.float32)
     cover = w.mean(axis=(1, 3))
     safe = jnp.maximum(cover, 1e-6)
+    screen = on_screen(screens, hit) * w[..., None]  # (rows, n, cols, n, screens)
+    if screens.size:
+        alb = alb * (1.0 - jnp.max(screen, axis=-1))[..., None]
+    screen_cover = jnp.moveaxis(screen.mean(axis=(1, 3)) / safe[..., None], -1, 0)
     colour = (alb * w[..., None]).mean(axis=(1, 3)) / safe[..., None]
     irr = (e * w[..., None]).mean(axis=(1, 3)) / safe[..., None]
     c = n // 2  # the central sample (n is odd)
     depth = hit.t[:, c, :, c]
     r, _ = omni.to_polar(jnp.arange(width)[None, :], (row0 + jnp.arange(n_rows))[:, None])
     gain = cover * (1.0 - vignetting * (r / omni.rim) ** 2)
-    return colour, jnp.moveaxis(irr, -1, 0), depth, gain.astype(jnp.float32)
+    return colour, jnp.moveaxis(irr, -1, 0), depth, gain.astype(jnp.float32), screen_cover
 
 
 def _shadow_starts(omni, room: Room3D, h: int, w: int, s: int) -> Float[Array, "h w 3"]:
@@ -152,24 +161,27 @@ def _shadow_starts(omni, room: Room3D, h: int, w: int, s: int) -> Float[Array, "
 
 
 @eqx.filter_jit
-def _static_view(omni, room: Room3D, lamps, intensity, vignetting, antialias: int, downsample: int):
-    """Colour, irradiance, depth, gain and the people's rays of the whole image, cast in blocks of
-    rows, and the coarse shadow grid's surface points."""
+def _static_view(omni, room: Room3D, screens: Screens, lamps, intensity, vignetting, antialias: int,
+                 downsample: int):
+    """Colour, irradiance, depth, gain, screen cover and the people's rays of the whole image, cast in
+    blocks of rows, and the coarse shadow grid's surface points."""
     width, height = omni.image_size
 
     def rows(r0):
-        colour, irr, depth, gain = _background_rows(omni, room, lamps, intensity, vignetting, r0, BLOCK_ROWS, width)
-        return colour, irr, depth, gain, _people_rays(omni, r0, BLOCK_ROWS, width, antialias)
+        colour, irr, depth, gain, screen = _background_rows(omni, room, screens, lamps, intensity, vignetting, r0,
+                                                            BLOCK_ROWS, width)
+        return colour, irr, depth, gain, screen, _people_rays(omni, r0, BLOCK_ROWS, width, antialias)
 
     starts = jnp.arange(0, height, BLOCK_ROWS, dtype=jnp.int32)
-    colour, irr, depth, gain, rays = lax.map(rows, starts)
+    colour, irr, depth, gain, screen, rays = lax.map(rows, starts)
 
     def join(x, axis=0):  # (blocks, ..., rows, ...) -> (..., the image's rows, ...)
         x = jnp.moveaxis(x, 0, axis)
-        return x.reshape(*x.shape[:axis], -1, *x.shape[axis + 2:])[(slice(None),) * axis + (slice(0, height),)]
+        rows = x.shape[axis] * x.shape[axis + 1]  # not -1: a screen cover of no screens is empty
+        return x.reshape(*x.shape[:axis], rows, *x.shape[axis + 2:])[(slice(None),) * axis + (slice(0, height),)]
 
     starts = _shadow_starts(omni, room, -(-height // downsample), -(-width // downsample), downsample)
-    return join(colour), join(irr, 1), join(depth), join(gain), join(rays, 2), starts
+    return join(colour), join(irr, 1), join(depth), join(gain), join(screen, 1), join(rays, 2), starts
 
 
 def _block_mean(x: np.ndarray, s: int) -> np.ndarray:
@@ -190,13 +202,13 @@ def _people_rays(omni, row0, n_rows: int, width: int, a: int):
     return jnp.moveaxis(d, -1, 2).reshape(a * a, 3, n_rows, width).astype(jnp.float32)
 
 
-def build_background(omni: OmniCamera, room: Room3D, lamps, intensity, spectrum, lamp_spectrum, vignetting,
-                     window: tuple[int, int], antialias: int, downsample: int) -> OmniBackground:
+def build_background(omni: OmniCamera, room: Room3D, screens: Screens, lamps, intensity, spectrum, lamp_spectrum,
+                     vignetting, window: tuple[int, int], antialias: int, downsample: int) -> OmniBackground:
     """Cast every pixel's rays once and store the static view of the room (see :class:`OmniBackground`).
 
-    ``lamps`` (k, 3) m, ``intensity`` (k,) grey levels at 1 m, ``spectrum`` (3,) the
-    ambient light's, ``lamp_spectrum`` (k, 3) the lamps' (one light plane when they all
-    equal ``spectrum``, three otherwise), ``vignetting`` (relative darkening at the rim),
+    ``screens`` the self-lit screens on the walls, ``lamps`` (k, 3) m, ``intensity`` (k,) grey
+    levels at 1 m, ``spectrum`` (3,) the ambient light's, ``lamp_spectrum`` (k, 3) the lamps'
+    (one light plane when they all equal ``spectrum``, three otherwise), ``vignetting`` (relative darkening at the rim),
     ``window`` the people's
     window (rows, columns) in pixels. Rows are cast in blocks of ``BLOCK_ROWS``
     (``lax.map``) to bound memory.
@@ -208,8 +220,8 @@ def build_background(omni: OmniCamera, room: Room3D, lamps, intensity, spectrum,
         lamp_spectrum, ambient_spectrum = None, None
     else:
         ambient_spectrum, spectrum = spectrum, jnp.ones((3,), jnp.float32)
-    colour, irr, depth, gain, rays, starts = _static_view(omni, room, lamps, intensity, jnp.float32(vignetting),
-                                                          antialias, downsample)
+    colour, irr, depth, gain, screen, rays, starts = _static_view(omni, room, f32(screens), lamps, intensity,
+                                                                  jnp.float32(vignetting), antialias, downsample)
     h, w = starts.shape[:2]
     g = np.pad(np.asarray(gain), ((0, h * downsample - height), (0, w * downsample - width)))
     inside = g.reshape(h, downsample, w, downsample).max(axis=(1, 3)) > 0
@@ -221,7 +233,8 @@ def build_background(omni: OmniCamera, room: Room3D, lamps, intensity, spectrum,
     coarse = _block_mean(np.asarray(irr), downsample)[:, cells[:, 0], cells[:, 1]]
     shadow = shadow_rays(jnp.asarray(np.broadcast_to(start[None], to_lamp.shape)), jnp.asarray(to_lamp))
     return OmniBackground(
-        colour=colour * spectrum * gain[..., None], irradiance=irr, depth=depth, gain=gain, rays=rays,
+        colour=colour * spectrum * gain[..., None], irradiance=irr, depth=depth, gain=gain,
+        screen_cover=screen * gain, rays=rays,
         shadow=shadow, shadow_irradiance=jnp.asarray(coarse, jnp.float32), shadow_index=jnp.asarray(index),
         eye=jnp.array([0.0, 0.0, 1.0], jnp.float32) * f32(omni.H_o),
         lamps=lamps, intensity=intensity, spectrum=spectrum, lamp_spectrum=lamp_spectrum,
@@ -359,11 +372,13 @@ class LinearFrame(eqx.Module):
 
 
 def render_linear(omni: OmniCamera, bg: OmniBackground, people: People, foot: Float[Array, "p 2"],
-                  facing: Float[Array, "p 2"], lamp_light: Float[Array, " k"], ambient) -> LinearFrame:
+                  facing: Float[Array, "p 2"], lamp_light: Float[Array, " k"], ambient,
+                  screen: Float[Array, "screens 3"]) -> LinearFrame:
     """One noise-free omni frame in grey levels (float32): the background lit by the lamps
     (``lamp_light`` scales each lamp's intensity: on/off times drift; each lamp of its own
     spectrum) and ``ambient`` (grey levels, drift included), minus the people's cast shadows,
-    with the people drawn over it far to near."""
+    plus the light each self-lit screen emits (``screen``, grey levels), with the people drawn
+    over it far to near."""
     foot32 = foot.astype(jnp.float32)
     facing32 = facing.astype(jnp.float32)
     weight = bg.light_weights(lamp_light)
@@ -376,6 +391,8 @@ def render_linear(omni: OmniCamera, bg: OmniBackground, people: People, foot: Fl
             lamps = lamps + weight[k, c] * bg.irradiance[k]
         light.append(ambient_light[c] + lamps * share[c])
     image = bg.colour * jnp.stack(light, axis=-1)
+    for i in range(bg.screen_cover.shape[0]):
+        image = image + bg.screen_cover[i, ..., None] * screen[i].astype(jnp.float32)
     labels = jnp.full(bg.size, -1, jnp.int32)
     n = people.count
     if n == 0:

@@ -5,7 +5,8 @@ scenario) and adds what the rig does not say: the room's walls and textures,
 furniture boxes (some may move once, at a given time), the people (how many,
 clothing, walking, standing still at the start or at given times), the lamps
 (one shared spectrum unless a lamp has its own, positions, intensities, switching
-times), slow illumination drift, and the sensor (noise, JPEG, anti-aliasing). Every key is documented in
+times), slow illumination drift, self-lit screens on the walls that change colour (a
+false-alarm source), and the sensor (noise, JPEG, anti-aliasing). Every key is documented in
 ``configs/scenarios/one_person.toml``.
 
 :func:`parse_scenario` validates the mapping against the schema and against the
@@ -175,6 +176,34 @@ class Lighting(eqx.Module):
         return 1.0 + self.drift_amplitude * jnp.sin(2.0 * jnp.pi * t / self.drift_period)
 
 
+class Screens(eqx.Module):
+    """Self-lit rectangles on walls (a television, a monitor): a scripted false-alarm source.
+
+    Screen ``i`` covers wall ``wall[i]`` (edge ``wall[i]`` of the rig's ``room.outline``,
+    from its corner ``wall[i]`` to the next) from ``along[i, 0]`` to ``along[i, 1]`` m
+    along it and from ``height[i, 0]`` to ``height[i, 1]`` m above the floor. It emits
+    (is not lit) its ``colours[i, j]`` (grey levels) for ``j < count[i]`` in turn, each
+    for ``period[i] / count[i]`` s, starting with the first at t = 0 (rows past
+    ``count[i]`` are padding).
+    """
+
+    wall: Int[Array, " s"]
+    along: Float[Array, "s 2"]
+    height: Float[Array, "s 2"]
+    colours: Float[Array, "s c 3"]
+    count: Int[Array, " s"]
+    period: Float[Array, " s"]
+
+    @property
+    def size(self) -> int:
+        return self.wall.shape[0]
+
+    def shown(self, t) -> Float[Array, "s 3"]:
+        """The colour (grey levels) each screen emits at time ``t`` (s)."""
+        j = jnp.floor(self.count * jnp.asarray(t) / self.period).astype(jnp.int32) % self.count
+        return jnp.take_along_axis(self.colours, j[:, None, None], axis=1)[:, 0]
+
+
 class Sensor(eqx.Module):
     """The omni camera's sensor: noise sigma (grey levels), vignetting, JPEG, sampling.
 
@@ -207,6 +236,7 @@ class Scenario(eqx.Module):
     furniture: Furniture
     crowd: Crowd
     lighting: Lighting
+    screens: Screens
     sensor: Sensor
 
 
@@ -340,6 +370,26 @@ class LightingSection(Section):
     lamps: list[LampSection] = Field(default_factory=list)
 
 
+class ScreenSection(Section):
+    name: str = ""
+    wall: Annotated[int, Field(ge=0, le=1023)] = Field(
+        description="edge of the rig's room.outline the screen hangs on, from corner `wall` to the next")
+    along_m: Annotated[list[Metres], Len(2, 2)] = Field(
+        description="from .. to, m along the wall from its first corner")
+    height_m: Annotated[list[Metres], Len(2, 2)] = Field(description="bottom .. top above the floor, m")
+    colours: Annotated[list[Annotated[list[Light], Len(3, 3)]], Len(1, 64)] = Field(
+        description="RGB grey levels the screen emits, shown in turn")
+    period_s: PosSeconds = Field(description="time to show every colour once, s; each for period_s / count")
+
+    @model_validator(mode="after")
+    def _ranges(self):
+        if not self.along_m[0] < self.along_m[1]:
+            raise ValueError("along_m must be [from, to] with from < to")
+        if not self.height_m[0] < self.height_m[1]:
+            raise ValueError("height_m must be [bottom, top] with bottom < top")
+        return self
+
+
 class SensorSection(Section):
     noise_sigma: Annotated[float, within(0.0, 255.0, "grey levels", why="an 8-bit image's whole range")] | None = (
         Field(None, description="grey levels; default: the rig's detection.sensor_sigma"))
@@ -358,6 +408,7 @@ class ScenarioFile(Section):
     furniture: list[FurnitureSection] = Field(default_factory=list)
     people: PeopleSection
     lighting: LightingSection
+    screens: list[ScreenSection] = Field(default_factory=list, description="self-lit screens on the walls")
     sensor: SensorSection = SensorSection()
 
 
@@ -415,6 +466,16 @@ def _check_against_rig(f: ScenarioFile, rig: Rig, source: str) -> None:
             hi = [a + b - c for a, b, c in zip(lo, box.corner_max, box.corner_min)]
             if not inside(lo, hi):
                 fail(f"furniture.{i}.moved_to", f"{box.moved_to}: the moved box must stand inside the room.outline")
+    corners = np.asarray(outline)
+    for i, screen in enumerate(f.screens):
+        if screen.wall >= len(corners):
+            fail(f"screens.{i}.wall", f"{screen.wall} is not an edge of the rig's room.outline "
+                                      f"(0 .. {len(corners) - 1})")
+        length = float(np.linalg.norm(corners[(screen.wall + 1) % len(corners)] - corners[screen.wall]))
+        if screen.along_m[1] > length:
+            fail(f"screens.{i}.along_m", f"{screen.along_m} must lie within the wall's {length:g} m")
+        if screen.height_m[1] > f.room.height:
+            fail(f"screens.{i}.height_m", f"{screen.height_m} must lie below room.height = {f.room.height} m")
     count = f.people.count
     for j, stop in enumerate(f.people.stops):
         if stop.person >= count:
@@ -469,6 +530,16 @@ def parse_scenario(data: Mapping[str, Any], rig: Rig, *, source: str = "scenario
         on=jnp.asarray([lamp.on for lamp in li.lamps], dtype=bool),
         switch=_a(switch), drift_amplitude=_a(li.drift.amplitude), drift_period=_a(li.drift.period),
     )
+    sc = f.screens
+    n_colours = max([len(x.colours) for x in sc] + [1])
+    colours = np.zeros((len(sc), n_colours, 3))
+    for i, x in enumerate(sc):
+        colours[i, : len(x.colours)] = x.colours
+    screens = Screens(
+        wall=jnp.asarray([x.wall for x in sc], jnp.int32), along=_a(np.reshape([x.along_m for x in sc], (-1, 2))),
+        height=_a(np.reshape([x.height_m for x in sc], (-1, 2))), colours=_a(colours),
+        count=jnp.asarray([len(x.colours) for x in sc], jnp.int32), period=_a([x.period_s for x in sc]),
+    )
     se = f.sensor
     sigma = float(rig.detection.sensor_sigma) if se.noise_sigma is None else se.noise_sigma
     sensor = Sensor(
@@ -480,5 +551,5 @@ def parse_scenario(data: Mapping[str, Any], rig: Rig, *, source: str = "scenario
         name=f.name, fps=float(f.fps), seed=int(f.seed), height=_a(ro.height), floor=_surface(ro.floor),
         walls=_surface(ro.walls), ceiling=_a(ro.ceiling), skirting_colour=_a(ro.skirting_colour),
         skirting_height=_a(ro.skirting_height), furniture=furniture, crowd=crowd, lighting=lighting,
-        sensor=sensor,
+        screens=screens, sensor=sensor,
     )

@@ -25,7 +25,7 @@ from jaxtyping import Array, Float, Int, UInt32
 
 from ..config import Rig
 from ._noise import derive_key, lattice_uniform, value_noise
-from ._scenario import Scenario, Surface
+from ._scenario import Scenario, Screens, Surface
 
 FLOOR, CEILING, WALL, FURNITURE = 0, 1, 2, 3
 #: Offset (m) that lifts shadow rays off their surface, and the smallest accepted hit distance.
@@ -214,6 +214,17 @@ def albedo(room: Room3D, hit: Hit) -> Float[Array, "*b 3"]:
     s = hit.surface[..., None]
     out = jnp.where(s == FLOOR, floor, jnp.where(s == WALL, wall, jnp.where(s == CEILING, room.ceiling, box)))
     return jnp.where(jnp.isfinite(hit.t)[..., None], jnp.clip(out, 0.0, 1.0), 0.0)
+
+
+def on_screen(screens: Screens, hit: Hit) -> Float[Array, "*b s"]:
+    """1.0 where a hit lies on each screen (its wall, within its extent along the wall and in
+    height), else 0.0."""
+    z = hit.point[..., 2, None]
+    u = hit.u[..., None]
+    on = ((hit.surface == WALL)[..., None] & (hit.index[..., None] == screens.wall)
+          & (u >= screens.along[:, 0]) & (u <= screens.along[:, 1])
+          & (z >= screens.height[:, 0]) & (z <= screens.height[:, 1]))
+    return on.astype(jnp.float32)
 
 
 def _lambert_one(p, n, lamp, intensity):

@@ -117,14 +117,15 @@ class RenderedFrame(eqx.Module):
 class Schedule(eqx.Module):
     """The lighting and the furniture of every frame, tabulated once (per-frame scalars computed
     inside the per-pixel loops would be recomputed for every pixel): lamps on, the drift factor,
-    each lamp's scale (on x drift), the ambient grey level (drift included) and the furniture's
-    arrangement (how many moving pieces have moved)."""
+    each lamp's scale (on x drift), the ambient grey level (drift included), the furniture's
+    arrangement (how many moving pieces have moved) and the colour each screen shows."""
 
     on: Bool[Array, "t k"]
     drift: Float[Array, " t"]
     lamp_light: Float[Array, "t k"]
     ambient: Float[Array, " t"]
     arrangement: Int[Array, " t"]
+    screen: Float[Array, "t s 3"]
 
 
 def clothing_contrast(people: People, scenario: Scenario) -> Float[Array, "p 2"]:
@@ -147,7 +148,8 @@ def light_schedule(scenario: Scenario, n_frames: int) -> Schedule:
     on = jax.vmap(li.lamp_on)(time)
     drift = jax.vmap(li.drift)(time)
     return Schedule(on=on, drift=drift, lamp_light=f32(on * drift[:, None]), ambient=f32(li.ambient * drift),
-                    arrangement=scenario.furniture.arrangement(time))
+                    arrangement=scenario.furniture.arrangement(time),
+                    screen=f32(jax.vmap(scenario.screens.shown)(time)))
 
 
 class Scene(eqx.Module):
@@ -183,7 +185,7 @@ class Scene(eqx.Module):
 class FrameState(eqx.Module):
     """One instant of a world (or a stack of them, along leading axes): frame index, the people's
     feet (m), facing and walking, which lamps are on, the drift, each lamp's scale, the ambient
-    grey level and the furniture's arrangement."""
+    grey level, the furniture's arrangement and the colour each screen shows."""
 
     t: Int[Array, "*n"]
     foot: Float[Array, "*n p 2"]
@@ -194,6 +196,7 @@ class FrameState(eqx.Module):
     lamp_light: Float[Array, "*n k"]
     ambient: Float[Array, "*n"]
     arrangement: Int[Array, "*n"]
+    screen: Float[Array, "*n s 3"]
 
 
 class World(eqx.Module):
@@ -302,7 +305,8 @@ def build_world(rig: Rig, scenario: Scenario, seed: int | None = None, n_frames:
     li, se = scenario.lighting, scenario.sensor
     backgrounds = []
     for room in rooms:
-        bg = build_background(omni, room, li.position, li.intensity, li.spectrum, li.lamp_spectrum, se.vignetting,
+        bg = build_background(omni, room, scenario.screens, li.position, li.intensity, li.spectrum, li.lamp_spectrum,
+                              se.vignetting,
                               window, se.antialias, se.shadow_downsample)
         if backgrounds:  # the people's rays do not depend on the furniture: share one buffer
             bg = eqx.tree_at(lambda b: b.rays, bg, backgrounds[0].rays)
@@ -328,14 +332,14 @@ def frame_state(paths: Paths, schedule: Schedule, t: Int[Array, "*n"]) -> FrameS
     t = eqx.error_if(t, jnp.any((t < 0) | (t >= n)), f"frame index outside 0..{n - 1}")
     return FrameState(t=t, foot=paths.position[t], facing=paths.facing[t], moving=paths.moving[t],
                       lamps_on=schedule.on[t], drift=schedule.drift[t], lamp_light=schedule.lamp_light[t],
-                      ambient=schedule.ambient[t], arrangement=schedule.arrangement[t])
+                      ambient=schedule.ambient[t], arrangement=schedule.arrangement[t], screen=schedule.screen[t])
 
 
 def _linear(scene: Scene, state: FrameState):
     """The frame over the static view of the state's arrangement (only that one is rendered)."""
     def render(bg):
         return render_linear(scene.true_rig.omni, bg, scene.people, state.foot, state.facing, state.lamp_light,
-                             state.ambient)
+                             state.ambient, state.screen)
 
     if len(scene.backgrounds) == 1:
         return render(scene.backgrounds[0])

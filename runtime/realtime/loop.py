@@ -100,6 +100,10 @@ class Samples:
         self._buf[self.count % self._buf.size] = v
         self.count += 1
 
+    def extend(self, values) -> None:
+        for v in values:
+            self.append(v)
+
     def values(self) -> np.ndarray:
         return self._buf[: min(self.count, self._buf.size)]
 

@@ -275,3 +275,56 @@ def test_one_spectrum_scenarios_render_as_before():
     assert digest(world.paths.position) == THREE_PEOPLE["paths"]
     for t in (0, 59):
         assert digest(world.frame(t).image) == THREE_PEOPLE[t], t
+
+
+# --------------------------------------------------------------------------------------
+# A self-lit screen (a false-alarm source)
+# --------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def screen_world():
+    """flickering_screen without the light's drift, 40 frames: only the people and the screen change."""
+    return _world("flickering_screen", 40,
+                  scenario=lambda sc: eqx.tree_at(lambda s: s.lighting.drift_amplitude, sc, jnp.zeros(())))
+
+
+def test_a_screen_emits_its_colour_of_the_moment_and_nothing_else_changes(screen_world):
+    """Pixels wholly on the screen hold its colour (times the vignetting) at each frame's time, whatever
+    the lamps and shadows (it emits); with the screen dark, those pixels are black and every pixel off
+    the screen is the same to the bit."""
+    w = screen_world
+    bg = w.background
+    gain = np.asarray(bg.gain)
+    cover = np.asarray(bg.screen_cover[0]) / np.maximum(gain, 1e-9)
+    frames = (0, 13, 26, 38)  # 0, 0.52, 1.04, 1.52 s: each of the four colours (0.5 s each)
+    on = (cover > 1 - 1e-6) & _clear(w, frames)
+    assert on.sum() > 200 and (cover > 0).sum() < 2000
+    colours = np.asarray(w.scenario.screens.colours[0])
+    dark = eqx.tree_at(lambda x: x.schedule.screen, w, jnp.zeros_like(w.schedule.screen))
+    for j, t in enumerate(frames):
+        lin, lin_dark = np.asarray(w.linear(t)), np.asarray(dark.linear(t))
+        np.testing.assert_allclose(lin[on], gain[on][:, None] * colours[j], rtol=1e-5)
+        assert np.all(lin_dark[on] == 0.0)
+        np.testing.assert_array_equal(lin[cover == 0], lin_dark[cover == 0])
+
+
+def test_the_ptz_sees_the_screen_change_colour(screen_world):
+    """The foveal view aimed at the screen's centre shows its colour of the moment (sensor noise aside)."""
+    from omnijax.world import render_foveal
+    from omnijax.world._foveal import project, ptz_view
+
+    w = screen_world
+    fo = w.true_rig.foveal
+    c, s = float(jnp.cos(fo.theta_c)), float(jnp.sin(fo.theta_c))
+    ptz = np.array([float(fo.D_c) * c, float(fo.D_c) * s, float(fo.H_f)])
+    target = jnp.array([-0.7, -3.0, 1.15])  # the screen's centre on the wall y = -3
+    v = np.asarray(target) - ptz
+    pan = np.arctan2(v @ [-s, c, 0.0], v @ [-c, -s, 0.0])
+    tilt = np.arctan2(v[2], np.hypot(v[0], v[1]))
+    view = ptz_view(w.true_rig, pan, tilt, 4.0, (64, 48))
+    np.testing.assert_allclose(np.asarray(project(view, target)), np.asarray(view.centre), atol=1e-6)
+    colours = np.asarray(w.scenario.screens.colours[0])
+    for j, t in enumerate((0, 13)):
+        centre = np.asarray(render_foveal(w, t, pan, tilt, 4.0, (64, 48)))[20:28, 28:36].reshape(-1, 3)
+        np.testing.assert_allclose(centre.mean(0), colours[j], atol=1.0)

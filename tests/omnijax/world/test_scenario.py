@@ -17,10 +17,10 @@ from tests.paths import CONFIGS
 SCENARIOS = sorted((CONFIGS / "scenarios").glob("*.toml"))
 
 
-def test_the_ten_scenarios_exist():
+def test_the_eleven_scenarios_exist():
     names = {p.stem for p in SCENARIOS}
     assert names == {"empty_room", "one_person", "three_people", "six_people", "lamps_switching", "fisheye_office",
-                     "standing_start", "stops_a_minute", "chair_moved", "two_spectra"}
+                     "standing_start", "stops_a_minute", "chair_moved", "two_spectra", "flickering_screen"}
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
@@ -77,6 +77,18 @@ def test_lamp_spectra_default_to_the_shared_one():
                                [[0.80, 0.90, 1.0], [1.0, 0.85, 0.65], [1.0, 0.85, 0.65]])
 
 
+def test_a_screen_shows_its_colours_in_turn():
+    _, sc = load_scenario(CONFIGS / "scenarios" / "flickering_screen.toml")
+    screens = sc.screens
+    assert screens.size == 1 and int(screens.wall[0]) == 0 and int(screens.count[0]) == 4
+    np.testing.assert_allclose(np.asarray(screens.along[0]), [3.2, 4.4])
+    colours = np.asarray(screens.colours[0])
+    for t, j in ((0.0, 0), (0.49, 0), (0.5, 1), (1.2, 2), (1.99, 3), (2.0, 0), (61.3, 2)):
+        np.testing.assert_array_equal(np.asarray(screens.shown(t))[0], colours[j], err_msg=str(t))
+    _, sc = load_scenario(CONFIGS / "scenarios" / "three_people.toml")
+    assert sc.screens.size == 0 and sc.screens.shown(1.0).shape == (0, 3)
+
+
 def test_noise_sigma_defaults_to_the_rigs(paper_rig):
     _, sc = load_scenario(CONFIGS / "scenarios" / "one_person.toml")
     assert float(sc.sensor.noise_sigma) == float(paper_rig.detection.sensor_sigma)
@@ -103,6 +115,8 @@ def _edit(d: dict, dotted: str, value) -> dict:
     return d
 
 
+SCREEN = {"wall": 0, "along_m": [3.2, 4.4], "height_m": [0.8, 1.5], "colours": [[200.0, 70.0, 50.0]],
+          "period_s": 2.0}
 BAD = [
     ("room.height", _DELETE, "room.height: missing key"),
     ("room.floor.colour", [0.5, 0.5, 1.5], "room.floor.colour.2"),
@@ -136,6 +150,14 @@ BAD = [
     ("sensor.jpeg_quality", 0, "sensor.jpeg_quality"),
     ("sensor.antialias", 9, "sensor.antialias"),
     ("fps", 0.0, "fps"),
+    ("screens", [{**SCREEN, "wall": 7}], "screens.0.wall: 7 is not an edge of the rig's room.outline (0 .. 3)"),
+    ("screens", [{**SCREEN, "along_m": [7.0, 9.0]}], "screens.0.along_m: [7.0, 9.0] must lie within the wall's 7.8 m"),
+    ("screens", [{**SCREEN, "along_m": [2.0, 1.0]}], "screens.0: along_m must be [from, to]"),
+    ("screens", [{**SCREEN, "height_m": [1.0, 3.5]}], "screens.0.height_m"),
+    ("screens", [{**SCREEN, "colours": []}], "screens.0.colours"),
+    ("screens", [{**SCREEN, "colours": [[1.0, 2.0]]}], "screens.0.colours.0"),
+    ("screens", [{**SCREEN, "period_s": 0.0}], "screens.0.period_s"),
+    ("screens", [{k: v for k, v in SCREEN.items() if k != "wall"}], "screens.0.wall: missing key"),
 ]
 
 

@@ -4,12 +4,16 @@ contract, the token, bad requests, choosing a target, pausing, pointing, zones i
 the rig file, the calibration assistant, the events on MQTT, and, where Chromium is installed, the page
 in a real headless browser. The demo's scenario and rig are copies, so that the zones the tests save
 never touch configs/.
+
+With ``OMNIJAX_SCREENSHOTS=DIR`` the browser tests save what the page shows into DIR (console_live.png,
+console_zone.png, console_calibration.png: the pictures of docs/console.md); without it they save nothing.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import shutil
 import signal
@@ -298,6 +302,14 @@ def browser(demo, tmp_path_factory):
     driver.quit()
 
 
+def _screenshot(browser, name: str) -> None:
+    """Save the browser's window as DIR/name when OMNIJAX_SCREENSHOTS=DIR is set (else nothing)."""
+    folder = os.environ.get("OMNIJAX_SCREENSHOTS")
+    if folder:
+        Path(folder).mkdir(parents=True, exist_ok=True)
+        assert browser.save_screenshot(str(Path(folder) / name)), name
+
+
 def _click_image(browser, x: float, y: float) -> None:
     """Click the omni image at pixel (x, y) (the overlay canvas over it, scaled as shown)."""
     from selenium.webdriver.common.action_chains import ActionChains
@@ -327,6 +339,8 @@ def test_browser_click_on_a_person_makes_them_the_target(demo, browser):
         return done
 
     assert wait_for(clicked, 120, 0.5)
+    time.sleep(1.0)  # a fresh omni image with the target bracketed
+    _screenshot(browser, "console_live.png")
     browser.find_element("id", "auto").click()
     assert wait_for(lambda: status(demo)["operator"]["target"] is None, 10)
 
@@ -350,7 +364,33 @@ def test_browser_draws_an_ignore_zone(demo, browser):
     assert np.allclose(zones[0]["points"], corners, atol=2.0)
     assert [z.kind for z in load_rig(demo.rig).zones] == ["ignore"]
     assert wait_for(lambda: "door" in browser.find_element("id", "zones-list").text, 10)
+    _screenshot(browser, "console_zone.png")
     browser.find_element("id", "mode-select").click()
+
+
+def test_browser_calibration_assistant_drives_the_ptz_and_records_a_mark(demo, browser):
+    """Calibrate mode: an arrow key turns the PTZ (a manual pointing, 1 deg), a click on the omni image
+    records the PTZ's position as an aim at the mark there, at the height typed in."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.keys import Keys
+
+    before = call(demo, "GET", "/api/calibration")[1]["aims"]
+    browser.find_element("id", "mode-calibrate").click()
+    assert browser.find_element("id", "calibration").get_attribute("open") is not None
+    pan = status(demo)["ptz"]["pan_deg"]
+    ActionChains(browser).send_keys(Keys.ARROW_RIGHT).perform()
+    assert wait_for(lambda: (s := status(demo))["manual"] and abs(s["ptz"]["pan_deg"] - pan) > 0.5, 10)
+    height = browser.find_element("id", "cal-height")
+    height.clear()
+    height.send_keys("1.5")
+    _click_image(browser, 250, 300)
+    cal = wait_for(lambda: (c := call(demo, "GET", "/api/calibration")[1])["aims"] == before + 1 and c, 20)
+    assert cal and any(a["height_m"] == 1.5 for p in cal["observations"] for a in p["aims"])
+    assert wait_for(lambda: "1.5: " in browser.find_element("id", "cal-table").text, 10)
+    browser.execute_script("document.getElementById('calibration').scrollIntoView()")
+    _screenshot(browser, "console_calibration.png")
+    browser.find_element("id", "mode-select").click()
+    assert call(demo, "POST", "/api/release")[0] == 200
 
 
 # -- last: the run ends -----------------------------------------------------------------------

@@ -66,6 +66,8 @@ def test_samples_ring_buffer_keeps_the_latest():
         s.append(float(v))
     assert len(s) == 10 and sorted(s.values()) == [6.0, 7.0, 8.0, 9.0]
     assert list(s.recent(2)) == [8.0, 9.0]
+    s.extend([10.0, 11.0, 12.0])  # the loop adds the latencies the drivers wrote meanwhile at once
+    assert len(s) == 13 and sorted(s.values()) == [9.0, 10.0, 11.0, 12.0]
 
 
 @pytest.mark.parametrize("argv, expected", [
