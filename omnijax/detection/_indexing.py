@@ -22,8 +22,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray, Shaped
-from scipy.optimize import brentq
-from scipy.stats import chi2, ncx2
 
 from ..config import Rig
 from ..geometry import person_image_extent
@@ -81,6 +79,9 @@ def upper_threshold(dof: float, k: np.ndarray, c_min: float, x_m: float) -> floa
     (2 dof per chromaticity sample) is exactly ``noncentral chi2(dof, k c)``; the
     mixture over the simulated ``k`` is solved for its quantile with SciPy.
     """
+    from scipy.optimize import brentq
+    from scipy.stats import chi2, ncx2
+
     ks, counts = np.unique(np.round(k), return_counts=True)
     w = counts / counts.sum()
     cdf = lambda t: float(np.sum(w * ncx2.cdf(t, dof, np.maximum(ks, 1.0) * c_min)))
@@ -91,6 +92,8 @@ def upper_threshold(dof: float, k: np.ndarray, c_min: float, x_m: float) -> floa
 def build_thresholds(rig: Rig, polar: PolarIndex, key: PRNGKeyArray, dof_per_sample: int = 2,
                      n_sim: int = 20_000) -> Thresholds:
     """Thresholds for the rig's ``x_f``, ``x_m`` and ``c_min`` (built once, outside jit)."""
+    from scipy.stats import chi2
+
     det = rig.detection
     x_f, x_m, c_min = float(det.x_f), float(det.x_m), float(det.c_min)
     dof = dof_per_sample * np.asarray(polar.samples)

@@ -109,7 +109,7 @@ def enable_cache(args) -> str | None:
     import os
     from pathlib import Path
 
-    import jax
+    from runtime.compile_cache import use_cache
 
     if args.no_cache:
         return None
@@ -125,8 +125,7 @@ def enable_cache(args) -> str | None:
                              "be written, or --no-cache") from None
         if not os.access(path, os.W_OK | os.X_OK):
             raise UsageError(f"--cache-dir: {path} cannot be written; expected a writable folder, or --no-cache")
-    jax.config.update("jax_compilation_cache_dir", str(path))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    use_cache(str(path))
     return str(path)
 
 

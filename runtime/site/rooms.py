@@ -33,14 +33,15 @@ def setup_jax(cache_dir: str | None) -> None:
     first room compiles, its next rooms of the same sizes, and other workers, reuse the programs)."""
     import jax
 
+    from runtime.compile_cache import use_cache
+
     jax.config.update("jax_enable_x64", True)
     if cache_dir:
         try:
             os.makedirs(cache_dir, exist_ok=True)
         except OSError:
             return  # a worker on another machine without that folder: compile afresh
-        jax.config.update("jax_compilation_cache_dir", cache_dir)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+        use_cache(cache_dir)
 
 
 def choose(results: dict, target: float) -> tuple[int, bool]:

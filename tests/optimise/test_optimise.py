@@ -95,6 +95,7 @@ def test_worst_case_stand_in_approaches_the_worst_from_the_better_side():
     assert float(floor_statistic(v, w, "mean", 1.0)) == pytest.approx(8.0 / 3.0)
 
 
+@pytest.mark.slow
 def test_objective_gradients_match_finite_differences(paper_rig):
     """Every objective (face_px, variance; mean and the smooth worst case) w.r.t. D_c, H_f, theta_c and
     H_o: forward-mode autodiff (the optimiser's mode, through the zoom's implicit function) against

@@ -309,6 +309,7 @@ def test_a_screen_emits_its_colour_of_the_moment_and_nothing_else_changes(screen
         np.testing.assert_array_equal(lin[cover == 0], lin_dark[cover == 0])
 
 
+@pytest.mark.slow
 def test_the_ptz_sees_the_screen_change_colour(screen_world):
     """The foveal view aimed at the screen's centre shows its colour of the moment (sensor noise aside)."""
     from omnijax.world import render_foveal

@@ -120,6 +120,7 @@ def test_marks_at_one_height_leave_the_scale_undetermined(paper_rig):
     assert why is not None and "do not determine" in why and "H_o" in why and "D_c" in why
 
 
+@pytest.mark.slow
 def test_positions_on_one_radial_line_are_refused(paper_rig):
     problem, _, _ = simulate_calibration(jax.random.key(3), paper_rig, _settings(paper_rig), 6)
     line = eqx.tree_at(lambda p: p.obs.theta_f, problem, jnp.full(6, 0.7))

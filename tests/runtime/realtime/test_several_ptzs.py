@@ -54,6 +54,7 @@ def test_demo_with_two_ptzs_scores_each_camera_and_each_person(demo2):
     assert (demo2 / "view.png").is_file()
 
 
+@pytest.mark.slow
 def test_run_drives_one_ptz_per_foveal_table(demo2, tmp_path):
     """``omnijax run`` with a rig of two ``[[foveal]]`` tables and two ``--ptz`` (emulated cameras): both
     are driven and sent home, and the summary has both."""
