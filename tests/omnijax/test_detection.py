@@ -181,6 +181,7 @@ def test_thresholds(paper_detector, paper_rig):
     assert float(th.seed_false_alarm) < float(paper_rig.detection.x_f)
 
 
+@pytest.mark.slow
 def test_polar_lines_sample_distinct_pixels(paper_detector):
     polar = paper_detector.polar
     idx, ok = np.asarray(polar.line_index), np.asarray(polar.line_ok)

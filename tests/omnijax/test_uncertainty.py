@@ -118,6 +118,7 @@ def test_jacfwd_jacrev_and_central_differences_agree(x):
     assert_jacobians_close(_outputs_of, x, step=1e-6 * np.maximum(np.abs(x), 1.0), rtol=FINITE_DIFF, floor=1e-4)
 
 
+@pytest.mark.slow
 @settings(max_examples=10)
 @given(x=inputs)
 def test_second_derivatives_against_finite_differences(x):

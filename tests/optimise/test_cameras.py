@@ -160,6 +160,7 @@ def two_cameras(tmp_path_factory):
     return out, json.loads((out / "layout.json").read_text())
 
 
+@pytest.mark.slow
 def test_cameras_contract(two_cameras):
     out, rep = two_cameras
     assert len(rep["cameras"]) == 2
@@ -176,6 +177,7 @@ def test_cameras_contract(two_cameras):
         assert (out / name).stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_two_camera_optimum_against_every_pair_of_the_grid(two_cameras, paper_rig):
     """Acceptance (issue 26): the k = 2 optimum is within 0.5 % of the best of every pair of the 4^3
     candidate placements (2016 pairs; face px, mean, 0.75 m floor), the same objective evaluated the

@@ -289,6 +289,7 @@ def screen_world():
                   scenario=lambda sc: eqx.tree_at(lambda s: s.lighting.drift_amplitude, sc, jnp.zeros(())))
 
 
+@pytest.mark.slow
 def test_a_screen_emits_its_colour_of_the_moment_and_nothing_else_changes(screen_world):
     """Pixels wholly on the screen hold its colour (times the vignetting) at each frame's time, whatever
     the lamps and shadows (it emits); with the screen dark, those pixels are black and every pixel off

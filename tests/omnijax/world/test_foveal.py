@@ -75,6 +75,7 @@ def test_ptz_conventions_match_pointing(paper_rig):
             assert math.acos(min(1.0, cosang)) < 1e-7
 
 
+@pytest.mark.slow
 def test_foveal_image_shows_the_head_at_its_centre(six_world):
     """The rendered foveal view (same scene and light) has the person's skin or hair at its centre."""
     t, i = 150, 1

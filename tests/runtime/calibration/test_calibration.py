@@ -278,6 +278,7 @@ def test_bad_frame_and_arguments_exit_2(tmp_path, capsys):
         assert code == 2 and expect in err and err.strip().count("\n") == 0, (args, err)
 
 
+@pytest.mark.slow
 @pytest.mark.realdata
 def test_calibrate_with_the_real_frame_and_its_ocamcalib_file(tmp_path, capsys):
     """An OCamCalib rig on the real image: the rim is fitted and reported against the file,

@@ -60,6 +60,7 @@ def planned(tmp_path_factory):
                            seconds=time.perf_counter() - t0)
 
 
+@pytest.mark.slow
 def test_plan_writes_the_contract(planned):
     rep = planned.report
     assert [r["name"] for r in rep["rooms"]] == ["office", "broken", "ell"]  # the site file's order
@@ -75,6 +76,7 @@ def test_plan_writes_the_contract(planned):
     assert rep["totals"] == {"rooms": 3, "ok": 2, "cameras": 2, "cost": 2.0}
 
 
+@pytest.mark.slow
 def test_a_failed_room_is_reported_and_the_others_finish(planned):
     broken = planned.report["rooms"][1]
     assert planned.code == 1 and planned.report["failed"] == ["broken"]
@@ -82,6 +84,7 @@ def test_a_failed_room_is_reported_and_the_others_finish(planned):
     assert "\n" not in broken["error"]
 
 
+@pytest.mark.slow
 def test_plan_resumes_without_rerunning_finished_rooms(planned, capsys):
     files = {n: (planned.out / "rooms" / f"{n}.json").stat().st_mtime_ns for n in ("office", "ell")}
     (planned.folder / "broken.toml").write_text(PAPER.read_text().replace("H_f = 2.00 ", "H_f = 3.60 "))

@@ -28,6 +28,7 @@ def demo2(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_demo_with_two_ptzs_scores_each_camera_and_each_person(demo2):
     s = json.loads((demo2 / "summary.json").read_text())
     cams = s["cameras"]
