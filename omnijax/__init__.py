@@ -100,7 +100,6 @@ from .detection import (
     chromaticity_covariance as chromaticity_covariance,
     detect as detect,
     estimate_sensor_noise as estimate_sensor_noise,
-    foot_evidence as foot_evidence,
     foot_scores as foot_scores,
     foot_sigma_mc as foot_sigma_mc,
     grey_change_measure as grey_change_measure,

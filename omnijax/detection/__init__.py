@@ -38,10 +38,8 @@ from ._detector import (
 )
 from ._foot import (
     FootSigmaTable as FootSigmaTable,
-    foot_evidence as foot_evidence,
     foot_scores as foot_scores,
     foot_sigma_mc as foot_sigma_mc,
-    scores_from_prefix as scores_from_prefix,
 )
 from ._indexing import (
     Sectors as Sectors,

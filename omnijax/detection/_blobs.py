@@ -10,11 +10,8 @@ or one behind the other as the camera sees them, and the paper's estimate then f
    sum of d^2 over the polar samples across the line, ``window_lines[r]`` lines each side (the
    paper's window: a person's width at that radius), one circular cumulative sum for all lines.
 2. **One person at a time** (:func:`find_people`, a ``lax.scan`` of ``max_people`` steps):
-   - eq 12 (corrected, with the person's height a hypothesis too:
-     :func:`~omnijax.detection.scores_from_prefix`) on every line's profile, among the feet inside
-     the room on that line (``hyp_in_room``), gives that line's best foot hypothesis ``i`` (and outer
-     end) and the excess d^2 it holds over the background's mean,
-     ``excess = sum (d2 - dof)``;
+   - eq 12 (corrected) on every line's profile gives that line's best foot hypothesis ``i`` and
+     the excess d^2 it holds over the background's mean, ``excess = sum (d2 - dof)``;
    - the line of largest excess among those whose hypothesis is a person is the next person:
      its contrast over its samples not yet explained (the non-centrality per sample, eq 9's
      ``c``) at least :data:`CONTRAST_FACTOR` times ``c_min``, and at least :data:`SUPPORT` of its
@@ -40,7 +37,6 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from ._foot import foot_evidence, scores_from_prefix
 from ._polar import PolarIndex
 
 #: A person's contrast over its unexplained samples must reach CONTRAST_FACTOR x ``c_min``.
@@ -64,8 +60,7 @@ REACH = 64
 class People(eqx.Module):
     """Up to K people found in one frame, strongest first (``valid`` marks the real ones).
 
-    ``i``: the foot hypothesis (index into the polar radii); ``out``: the index just past the person's
-    outer end (the height eq 12 chose, :func:`~omnijax.detection.scores_from_prefix`); ``centre``: the centre line
+    ``i``: the foot hypothesis (index into the polar radii); ``centre``: the centre line
     (fractional line index); ``first``/``last``: the run of lines (``last`` may pass ``T - 1``);
     ``contrast``: non-centrality per sample over the unexplained samples; ``excess``: d^2 above
     the background's mean on the person's profile; ``support``: share of significant radii;
@@ -76,7 +71,6 @@ class People(eqx.Module):
 
     valid: Bool[Array, " K"]
     i: Int[Array, " K"]
-    out: Int[Array, " K"]
     centre: Float[Array, " K"]
     first: Int[Array, " K"]
     last: Int[Array, " K"]
@@ -132,35 +126,32 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     T, R = d2.shape
     step = 2 * jnp.pi / T
     half = polar.window_lines
+    out = polar.hyp_out
     r_idx = jnp.arange(R)
     line_idx = jnp.arange(T)
-    n_window = window_sums(ok, half)
-    n_all = _prefix(n_window)
+    n_all = _prefix(window_sums(ok, half))
     dps = dof_per_sample
 
     def one(carry, _):
         d2, explained = carry
         Q = window_sums(d2, half)
         PQ = _prefix(Q)
-        evidence = foot_evidence(Q, n_window, dps, c_min, window_sums(ok * explained, half))
-        eq12, height = scores_from_prefix(_prefix(evidence), polar)
-        eq12 = jnp.where(polar.hyp_in_room, eq12, -jnp.inf)
+        eq12 = jnp.where(polar.hyp_ok[None], 2 * (PQ[:, out] - PQ[:, :-1]) - PQ[:, -1:], -jnp.inf)
         i_line = jnp.argmax(eq12, 1)
-        o_line = polar.hyp_out_h[jnp.take_along_axis(height, i_line[:, None], 1)[:, 0], i_line]
+        o_line = out[i_line]
         n_line = jnp.maximum(_span(n_all, i_line, o_line), 1.0)
         vis_line = _span(_prefix(window_sums(ok * (1.0 - explained), half)), i_line, o_line)
         excess = _span(PQ, i_line, o_line) - dps * n_line  # explained samples hold exactly dps
         contrast = excess / jnp.maximum(vis_line, 1.0)
         support = _span(_prefix((Q > window[None]).astype(jnp.float32)), i_line, o_line) / jnp.maximum(
             o_line - i_line, 1)
-        possible = jnp.isfinite(jnp.take_along_axis(eq12, i_line[:, None], 1)[:, 0])  # a foot in the room
-        person = candidate & possible & (contrast >= CONTRAST_FACTOR * c_min) & (support >= SUPPORT)
+        person = candidate & (contrast >= CONTRAST_FACTOR * c_min) & (support >= SUPPORT)
         score = jnp.where(person, excess, -jnp.inf)
         t0 = jnp.argmax(score)
         found = jnp.isfinite(score[t0])
-        i0, o0 = i_line[t0], o_line[t0]
+        i0 = i_line[t0]
         hw = 0.5 * polar.hyp_width[i0] / step  # the model's half width, lines
-        rad = (r_idx >= i0) & (r_idx < o0)
+        rad = (r_idx >= i0) & (r_idx < out[i0])
         ring = (t0 + jnp.arange(-REACH, REACH + 1)) % T
         per_line = jnp.sum(jnp.where(rad[None], d2[ring] - dps * ok[ring], 0.0), 1)
         sig = per_line - 0.5 * c_min * jnp.sum(jnp.where(rad[None], ok[ring], 0.0), 1)
@@ -168,18 +159,18 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
         first, last = t0 + left, t0 + right
         centre = 0.5 * (first + last)
         tc = jnp.floor(centre).astype(jnp.int32) % T
-        i, o = i_line[tc], o_line[tc]
+        i = i_line[tc]
         # explain: the run and the model's width around the centre, the person's radii (tall)
         k = jnp.ceil(0.5 * polar.hyp_width[i] / step).astype(jnp.int32) + MARGIN_LINES
         e_first, e_last = jnp.minimum(first - MARGIN_LINES, tc - k), jnp.maximum(last + MARGIN_LINES, tc + k)
         tall = jnp.ceil(TALL_SIGMAS * sigma_H_p * polar.hyp_dout_dH[i]).astype(jnp.int32)
         r0 = jnp.maximum(jnp.minimum(i, i0) - MARGIN_R, 0)
-        r1 = jnp.minimum(jnp.maximum(o, o0) + tall + MARGIN_R, R)
+        r1 = jnp.minimum(jnp.maximum(out[i], out[i0]) + tall + MARGIN_R, R)
         in_lines = (line_idx - e_first) % T <= e_last - e_first
         on = found & in_lines[:, None] & (r_idx[None] >= r0) & (r_idx[None] < r1)
         d2 = jnp.where(on, dps * ok, d2)
         visible = vis_line[t0] / n_line[t0]
-        rec = dict(valid=found, i=i, out=o, centre=centre, first=first, last=last, contrast=contrast[t0],
+        rec = dict(valid=found, i=i, centre=centre, first=first, last=last, contrast=contrast[t0],
                    excess=excess[t0], support=support[t0], visible=visible,
                    explained=jnp.stack([e_first, e_last, r0, r1]))
         return (d2, explained | on), rec

@@ -64,7 +64,7 @@ def build_detector(rig: Rig, key: PRNGKeyArray | None = None, measure: str = "ch
     return Detector(
         omni=rig.omni, polar=polar, thresholds=build_thresholds(rig, polar, k_th, dps),
         foot_sigma=build_foot_sigma_table(polar, k_foot, rig.detection.foot_mc_profiles, dps,
-                                          rig.sigmas.H_p, rig.detection.c_min),
+                                          rig.sigmas.H_p),
         sigma_H_p=jnp.asarray(rig.sigmas.H_p), max_people=rig.detection.max_people, measure=measure,
     )
 
@@ -147,8 +147,8 @@ def line_change(detector: Detector, frame: UInt8[Array, "H W 3"], lines: LineBac
     return jnp.where(detector.polar.line_ok, d2, 0.0)
 
 
-def _foot_sigmas(detector: Detector, i, out, contrast, width, visible=1.0) -> tuple[Array, Array]:
-    """``(sigma_r_f, sigma_theta_f)`` of a detection whose foot hypothesis is ``i`` (outer end before ``out``).
+def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0) -> tuple[Array, Array]:
+    """``(sigma_r_f, sigma_theta_f)`` of a detection whose foot hypothesis is ``i``.
 
     One upright person's image is symmetric about the foot's azimuth, so the run's centre is
     unbiased and its error is where the two edges fall inside their lines' bins of width
@@ -166,21 +166,18 @@ def _foot_sigmas(detector: Detector, i, out, contrast, width, visible=1.0) -> tu
       ``min((excess + deficit) / width_1, 1)`` of a uniform spread over the person's extent on top
       of the Monte Carlo ``sigma_r_f``; the whole of it when the foot hypothesis is the first or
       last possible one (the person reaches past the sampled radii: the image's edge or the blind
-      centre); and the share of the person's window that a stronger person hid (``1 - visible``);
-    - at the first or last hypothesis the azimuth too is anywhere within one person's width there
-      (``width_1^2 / 12``): near the blind centre a person's image is wider than the model's at the
-      first hypothesis, and the run holds only part of it (errors of 15-30 degrees measured at 0.3-0.5 m).
+      centre); and the share of the person's window that a stronger person hid (``1 - visible``).
     """
     polar = detector.polar
     step = 2 * jnp.pi / polar.n_theta
     one = polar.hyp_width[i]
     excess = jnp.maximum(width - one - step, 0.0)
     deficit = jnp.maximum(one - width - step, 0.0)
-    extent = (out - i).astype(jnp.float64)
+    sigma_theta = jnp.sqrt(step**2 / 24 + excess**2 / 4 + deficit**2 / 12)
+    extent = (polar.hyp_out[i] - i).astype(jnp.float64)
     ok = polar.hyp_ok
     first, last = jnp.argmax(ok), ok.shape[0] - 1 - jnp.argmax(ok[::-1])
     edge = (i <= first) | (i >= last)
-    sigma_theta = jnp.sqrt(step**2 / 24 + excess**2 / 4 + deficit**2 / 12 + jnp.where(edge, one**2 / 12, 0.0))
     share = jnp.where(edge, 1.0, jnp.minimum((excess + deficit) / one + (1.0 - visible), 1.0))
     sigma_r = jnp.sqrt(foot_sigma_lookup(detector.foot_sigma, i, contrast) ** 2 + share * extent**2 / 12)
     return sigma_r, sigma_theta
@@ -204,13 +201,13 @@ def detections_of(detector: Detector, people: People) -> Detections:
     step = 2 * jnp.pi / polar.n_theta
     i = people.i
     width = (people.last - people.first + 1) * step
-    sigma_r, sigma_theta = _foot_sigmas(detector, i, people.out, people.contrast, width, people.visible)
+    sigma_r, sigma_theta = _foot_sigmas(detector, i, people.contrast, width, people.visible)
     theta_f = wrap_2pi(people.centre * step)
     R = polar.hyp_R[i]
     valid = merge_fragments(people.valid, jnp.stack([R * jnp.cos(theta_f), R * jnp.sin(theta_f)], -1))
     return Detections(
         valid=valid, r_f=polar.hyp_r_f[i], theta_f=theta_f, sigma_r_f=sigma_r, sigma_theta_f=sigma_theta,
-        contrast=people.contrast, r_in=polar.radii[i], r_out=polar.radii[0] + people.out,
+        contrast=people.contrast, r_in=polar.radii[i], r_out=polar.radii[0] + polar.hyp_out[i],
         theta_l=wrap_2pi(people.first * step), theta_r=wrap_2pi(people.last * step), peak=people.excess,
         region=people.explained,
     )

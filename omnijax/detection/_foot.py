@@ -1,28 +1,17 @@
 """Foot estimate (eq 11-12, corrected) and its uncertainty by perturbation.
 
-Along a line, hypothesis ``i`` puts the person's inner end at sample ``i`` and its
-outer end just before ``out(i)`` (the person-extent model of the polar index). With
-background d^2 ~ chi2_2 (log density -d^2/2 + const), the maximum a posteriori hypothesis
-is (eq 12 with its signs corrected)
+Along a sector's centre line, hypothesis ``i`` puts the person's inner end at
+sample ``i`` and its outer end just before ``out(i)`` (the person-extent model of the
+polar index). With background d^2 ~ chi2_2 (log density -d^2/2 + const), the
+maximum a posteriori hypothesis is (eq 12 with its signs corrected)
 
     argmax_i [ sum_{i <= r < out(i)} d2_bar(r) - sum_{r < i} d2_bar(r) - sum_{r >= out(i)} d2_bar(r) ],
 
-evaluated for every ``i`` at once with prefix sums. Beyond the paper, the person's height
-is a hypothesis too (:data:`~omnijax.detection._polar.HEIGHT_STEPS`: ``out_k(i)`` for heights
-``H_p + delta_k sigma_H``), each scored less its prior's ``delta_k^2``, and the best over
-heights is the hypothesis's score (:func:`scores_from_prefix`): with the paper's one length, a
-person taller or shorter than the prior makes the score flat over the difference of the
-lengths, and the foot lands anywhere in it (several pixels of bias in the far field, measured
-in the synthetic world). With the length free the score must not reward a background sample
-taken into the person: each sample's d^2 enters as its *evidence*, less the background's mean
-and half the least contrast ``c_min`` a person is promised to have (:func:`foot_evidence`; a
-person's sample gains, a background sample loses, on average). For one length this is eq 12
-(corrected) up to a term that varies only with the window's width along the line:
-``sum_in - sum_out = 2 sum_in - sum_all``.
-``sigma_r_f`` comes from a vmapped Monte Carlo: profiles drawn with the measured contrast
-(background radii chi2(2 w), person radii noncentral chi2(2 w, w c)) for a person whose
-height is drawn from the prior (its outer end moves by ``d r_out / d H_p`` times the draw,
-the derivative by autodiff), re-run through the estimator; the root mean square error
+evaluated for every ``i`` at once with prefix sums. ``sigma_r_f`` comes from a
+vmapped Monte Carlo: profiles drawn with the measured contrast (background radii
+chi2(2 w), person radii noncentral chi2(2 w, w c)) for a person whose height is
+drawn from the prior (its outer end moves by ``d r_out / d H_p`` times the draw, the
+derivative by autodiff), re-run through the estimator; the root mean square error
 of the axis foot, with the 1-pixel quantisation of the inner end added.
 Because the estimator is the same at every frame, the Monte Carlo is tabulated
 once over (hypothesis, contrast) and interpolated per detection.
@@ -36,44 +25,19 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ._indexing import chi2_variate, noncentral_chi2_variate
-from ._polar import HEIGHT_STEPS, PolarIndex
-
-#: A sample inside a person that looks like the background costs CAMOUFLAGE per sample of evidence, not
-#: its whole shortfall: clothes of the floor's colour hide part of a person, and then the height prior,
-#: not the hidden part's length, must decide where the foot is.
-CAMOUFLAGE = 0.01
+from ._polar import PolarIndex
 
 
-def foot_evidence(profile: Float[Array, "*b R"], n: Float[Array, "*#b R"], dof_per_sample: int, c_min,
-                  explained: Float[Array, "*#b R"] | float = 0.0) -> Array:
-    """What the windowed profile's d^2 (``n`` samples summed at each radius) holds beyond a background
-    sample's mean and half the least contrast ``c_min``: positive on a person, on the background
-    negative but no less than ``-CAMOUFLAGE`` per sample. ``explained`` of the samples (a stronger
-    person's, found first, whose d^2 was set to the background's mean) are unknown: no evidence either
-    way."""
-    x = profile - n * dof_per_sample - (n - explained) * 0.5 * c_min
-    return jnp.maximum(x, -CAMOUFLAGE * n)
-
-
-def scores_from_prefix(P: Float[Array, "*b R1"], polar: PolarIndex) -> tuple[Array, Array]:
-    """Eq 12 (corrected, see the module docstring) for every foot hypothesis, from the prefix sums ``P``
-    (a leading 0, ``R + 1`` long) of the profiles' :func:`foot_evidence`: each hypothesis's best score
-    over the heights, ``2 sum_in evidence - delta^2``, and the index of that height in
-    ``HEIGHT_STEPS``; ``-inf`` where the person would leave the sampled radii."""
-    steps = jnp.asarray(HEIGHT_STEPS, P.dtype)
-    inside = P[..., polar.hyp_out_h] - P[..., None, :-1]  # (*b, H, R)
-    score = jnp.where(polar.hyp_ok_h, 2 * inside - (steps**2)[:, None], -jnp.inf)
-    return jnp.max(score, -2), jnp.argmax(score, -2)
-
-
-def foot_scores(evidence: Float[Array, "*b R"], polar: PolarIndex) -> Float[Array, "*b R"]:
-    """:func:`scores_from_prefix` of profiles' :func:`foot_evidence`."""
-    P = jnp.concatenate([jnp.zeros((*evidence.shape[:-1], 1), evidence.dtype), jnp.cumsum(evidence, -1)], -1)
-    return scores_from_prefix(P, polar)[0]
+def foot_scores(profile: Float[Array, " R"], polar: PolarIndex) -> Float[Array, " R"]:
+    """Eq 12 (corrected) for every hypothesis; ``-inf`` where the person would leave the sampled radii."""
+    P = jnp.concatenate([jnp.zeros(1, profile.dtype), jnp.cumsum(profile)])
+    inside = P[polar.hyp_out] - P[:-1]
+    score = inside - (P[-1] - inside)
+    return jnp.where(polar.hyp_ok, score, -jnp.inf)
 
 
 def foot_sigma_mc(polar: PolarIndex, i, contrast, key: PRNGKeyArray, n_profiles: int,
-                  dof_per_sample: int = 2, sigma_H_p=0.0, c_min=0.0) -> Array:
+                  dof_per_sample: int = 2, sigma_H_p=0.0) -> Array:
     """Root mean square error (px, of the axis foot's image radius) for a person at ``i``."""
     w = polar.window_n
     r = jnp.arange(w.shape[0])
@@ -83,7 +47,7 @@ def foot_sigma_mc(polar: PolarIndex, i, contrast, key: PRNGKeyArray, n_profiles:
     bg = chi2_variate(kb, dof_per_sample * w, (n_profiles, w.shape[0]))
     obj = noncentral_chi2_variate(ko, dof_per_sample * w, w * contrast, (n_profiles, w.shape[0]))
     profiles = jnp.where(on, obj, bg)
-    est = jnp.argmax(foot_scores(foot_evidence(profiles, w, dof_per_sample, c_min), polar), -1)
+    est = jax.vmap(lambda p: jnp.argmax(foot_scores(p, polar)))(profiles)
     slope = polar.hyp_r_f[jnp.minimum(i + 1, w.shape[0] - 1)] - polar.hyp_r_f[i]
     return jnp.sqrt(jnp.mean((polar.hyp_r_f[est] - polar.hyp_r_f[i]) ** 2) + slope**2 / 12)
 
@@ -97,7 +61,7 @@ class FootSigmaTable(eqx.Module):
 
 
 def build_foot_sigma_table(polar: PolarIndex, key: PRNGKeyArray, n_profiles: int, dof_per_sample: int = 2,
-                           sigma_H_p=0.0, c_min=0.0, n_index: int = 16,
+                           sigma_H_p=0.0, n_index: int = 16,
                            contrasts=(0.25, 0.5, 1, 2, 4, 8, 16, 64, 256, 1024, 4096)) -> FootSigmaTable:
     """Tabulate :func:`foot_sigma_mc` over the valid hypotheses and a range of contrasts (rendered
     and real people reach contrasts in the thousands; the lookup clamps beyond the last)."""
@@ -108,8 +72,7 @@ def build_foot_sigma_table(polar: PolarIndex, key: PRNGKeyArray, n_profiles: int
     keys = jax.random.split(key, ii.size)
     # one cell at a time (lax.map): vmapping the Gamma sampler's rejection loops over every
     # cell at once makes all of them wait for the slowest lane
-    cell = lambda args: foot_sigma_mc(polar, args[0], args[1], args[2], n_profiles, dof_per_sample, sigma_H_p,
-                                      c_min)
+    cell = lambda args: foot_sigma_mc(polar, args[0], args[1], args[2], n_profiles, dof_per_sample, sigma_H_p)
     table = jax.jit(lambda a, b, k: jax.lax.map(cell, (a, b, k)))(ii.ravel(), cc.ravel(), keys)
     return FootSigmaTable(index=grid.astype(jnp.float64), log_contrast=jnp.log(c), sigma=table.reshape(ii.shape))
 

@@ -11,11 +11,8 @@ Built once per rig (NumPy-free, but not traced: sizes come out of the geometry):
   person there (``window_lines``; the window sums the polar samples of those lines,
   :func:`omnijax.detection.window_sums`), and the samples in it (``window_n``);
 - foot hypotheses: for each inner end ``i`` of a person along a line, the index just
-  past its outer end (for the prior's height and for the heights :data:`HEIGHT_STEPS` prior
-  standard deviations from it), the image radius of its axis foot (what eq 1 turns into R_p),
-  that floor radius R_p (m) and the person's azimuth span there; and, per line, which of them put
-  the foot inside the room's outline (``hyp_in_room``: nobody stands beyond a wall; a person whose
-  clothes hide their legs would otherwise be placed where only their head is seen, metres outside);
+  past its outer end, the image radius of its axis foot (what eq 1 turns into R_p), that
+  floor radius R_p (m) and the person's azimuth span there;
 - the rig's *ignore* zones (``[[zones]]``, :mod:`omnijax.config`): line samples inside them are
   left out like repeats (``line_ok``), so that nothing is detected there and a line's
   chi-square counts only the samples left.
@@ -36,14 +33,6 @@ from ..geometry import floor_radius, person_image_extent, point_image_radius
 
 #: Fewest pixels of radius the polar sampling needs (a person's profile along a line).
 MIN_POLAR_SPAN_PX = 8
-#: The person heights each foot hypothesis is tried with, in the height prior's standard deviations
-#: (``[sigmas] H_p``) from its mean (the middle one is the prior's). The paper fixes the height: a
-#: person taller or shorter than the prior then moves the foot estimate by half the difference of
-#: their image lengths (eq 12's score is flat over it), a bias of several pixels in the far field.
-HEIGHT_STEPS = (-2.0, -1.0, 0.0, 1.0, 2.0)
-#: A foot hypothesis may lie this far (m) beyond the room's outline (calibration error, a person
-#: leaning on the wall) before it is refused on that line.
-ROOM_MARGIN_M = 0.25
 
 
 class PolarIndex(eqx.Module):
@@ -58,9 +47,6 @@ class PolarIndex(eqx.Module):
     window_n: Float[Array, " R"]
     hyp_out: Int[Array, " R"]
     hyp_ok: Bool[Array, " R"]
-    hyp_out_h: Int[Array, "H R"]
-    hyp_ok_h: Bool[Array, "H R"]
-    hyp_in_room: Bool[Array, "T R"]
     hyp_r_f: Float[Array, " R"]
     hyp_R: Float[Array, " R"]
     hyp_dout_dH: Float[Array, " R"]
@@ -165,20 +151,12 @@ def build_polar_index(rig: Rig) -> PolarIndex:
 
     hyp_out = np.ceil(r_out - r_min).astype(np.int64)
     hyp_ok = (hyp_out <= n_r) & (hyp_out > np.arange(n_r))
-    pulled = np.maximum(hyp_R - ROOM_MARGIN_M, 0.0)
-    in_room = np.asarray(rig.room.inside_outline(pulled[None] * np.cos(theta)[:, None],
-                                                 pulled[None] * np.sin(theta)[:, None]))
-    steps = np.asarray(HEIGHT_STEPS)[:, None] * float(rig.sigmas.H_p)
-    hyp_out_h = np.ceil(r_out[None] + steps * dout_dH[None] - r_min).astype(np.int64)
-    hyp_ok_h = (hyp_out_h <= n_r) & (hyp_out_h > np.arange(n_r)[None]) & hyp_ok[None]
     return PolarIndex(
         theta=jnp.asarray(theta), radii=jnp.asarray(radii),
         line_index=jnp.asarray(flat, dtype=jnp.int32), line_ok=jnp.asarray(line_ok),
         samples=jnp.asarray(line_ok.sum(1), dtype=float),
         window_lines=jnp.asarray(window_lines, dtype=jnp.int32), window_n=jnp.asarray(2.0 * window_lines + 1),
         hyp_out=jnp.asarray(np.minimum(hyp_out, n_r), dtype=jnp.int32), hyp_ok=jnp.asarray(hyp_ok),
-        hyp_out_h=jnp.asarray(np.clip(hyp_out_h, 1, n_r), dtype=jnp.int32), hyp_ok_h=jnp.asarray(hyp_ok_h),
-        hyp_in_room=jnp.asarray(in_room),
         hyp_r_f=jnp.asarray(hyp_r_f), hyp_R=jnp.asarray(hyp_R), hyp_dout_dH=jnp.asarray(dout_dH),
         hyp_width=jnp.asarray(hyp_width), image_size=(W_img, H_img),
     )

@@ -36,7 +36,7 @@ def test_perceive_measures_the_detections_on_the_floor_with_the_sigma_rule(paper
     k = int(np.argmax(valid))
     r_f, th = float(dets.r_f[k]), float(dets.theta_f[k])
     hyp_r_f = paper_detector.polar.hyp_r_f
-    step_r = float(hyp_r_f[i + 1] - hyp_r_f[i])  # within one hypothesis: the person's height is one too
+    step_r = float(hyp_r_f[i + 1] - hyp_r_f[i])  # within one hypothesis of the painted one
     assert r_f == pytest.approx(float(hyp_r_f[i]), abs=1.01 * step_r)
     d = paper_rig.detection
     # the rule: the detector's sigmas scaled by the rig's gains, widened by its extra terms
