@@ -190,6 +190,7 @@ def test_a_floor_point_without_covariance_is_a_detection_with_the_default_sigmas
 # Rules, zero offsets, vmap and gradients
 
 
+@pytest.mark.slow
 def test_rules(paper_rig):
     only = aim_detection(paper_rig, 100.0, 0.7)
     assert set(only.zooms) == {paper_rig.zoom_rule} and only.zoom is only.zooms[paper_rig.zoom_rule]

@@ -259,6 +259,7 @@ def test_uniform_lighting_change_is_not_a_person(paper_detector, painted):
     assert not bool(np.asarray(d.valid).any())
 
 
+@pytest.mark.slow
 def test_build_detector_fisheye(fisheye_rig):
     import dataclasses
 

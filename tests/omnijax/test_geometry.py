@@ -24,6 +24,7 @@ def _finite_everywhere(rig, x):
     return bool(jnp.all(jnp.isfinite(y)) & jnp.all(jnp.isfinite(J)) & jnp.all(jnp.isfinite(H)))
 
 
+@pytest.mark.slow
 def test_under_the_omni_camera(paper_rig):
     x = _x(paper_rig, 0.0, 0.3)
     p = pointing(x, paper_rig.omni.profile)

@@ -155,7 +155,8 @@ def _log_zoom(u, lens, cov4, distance, tilt, slant, R_h, p_contain):
                                R_h, p).zoom)
 
 
-@pytest.mark.parametrize("r_f,theta", [pytest.param(100.0, 0.7, marks=pytest.mark.slow), (130.0, -2.0), (45.0, 2.8)])
+@pytest.mark.parametrize("r_f,theta", [pytest.param(100.0, 0.7, marks=pytest.mark.slow),
+                                       pytest.param(130.0, -2.0, marks=pytest.mark.slow), (45.0, 2.8)])
 def test_calibrated_zoom_gradient_matches_finite_differences(paper_rig, r_f, theta):
     """The implicit-function-theorem derivatives of the calibrated zoom, forward and reverse mode,
     against central differences of the root itself, w.r.t. relative changes (step 1e-4) of the

@@ -207,6 +207,7 @@ def test_a_lamp_of_its_own_spectrum_changes_chromaticity_when_it_switches(two_sp
     assert d @ np.linalg.solve(cov, d) < 18.4
 
 
+@pytest.mark.slow
 def test_shadows_change_chromaticity_under_two_spectra(two_spectra):
     """Noise-free, two_spectra: a floor pixel in a person's shadow has another chromaticity than it has
     lit (the shadow takes away one lamp's light more than the others'), unlike under one spectrum

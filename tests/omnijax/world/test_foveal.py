@@ -18,6 +18,7 @@ def _true_inputs(world, t, i):
                       rig.omni.r_m, tr.H_p[i], tr.R_h[i]])
 
 
+@pytest.mark.slow
 def test_pointing_at_the_true_head_puts_it_at_the_centre(six_world):
     """eq 1-4 with the true rig and the true person aim the PTZ at the head's centre: it falls on the
     image centre ((W - 1) / 2, (H - 1) / 2) to 1e-6 px, for every person in several frames."""

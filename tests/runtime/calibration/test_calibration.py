@@ -217,6 +217,7 @@ def test_calibrate_contract_and_round_trip(tmp_path, capsys):
         assert abs(p[name]["value"] - value) < 3.5 * p[name]["sigma"], name
 
 
+@pytest.mark.slow
 def test_calibrate_simulate_contract(tmp_path, capsys):
     out = tmp_path / "sim"
     code, stdout, err = _run(capsys, "--simulate", "8", "--positions", "6", "--config", PAPER, "--out", out)

@@ -203,6 +203,7 @@ def test_state_file_and_link_are_checked_before_the_pty_opens(tmp_path, capsys):
 # Other programs' warnings, and what the demo says it wrote
 # ------------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_opencv_says_nothing_before_the_one_line(tmp_path):
     """OpenCV's own warnings (a camera index that is not there, a file that is not a video) are silenced."""
     junk = tmp_path / "junk.avi"

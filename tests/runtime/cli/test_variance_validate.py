@@ -23,7 +23,8 @@ def _variance(capsys, *args):
     return json.loads(out)
 
 
-@pytest.mark.parametrize("method", ["autodiff", "analytic", "second_order", "montecarlo"])
+@pytest.mark.parametrize("method", ["autodiff", "analytic", pytest.param("second_order", marks=pytest.mark.slow),
+                                    "montecarlo"])
 def test_variance_contract(capsys, method):
     extra = ["--rel-tol", "0.05"] if method == "montecarlo" else []
     rep = _variance(capsys, "--foot", "100", "0.7", "--method", method, *extra)

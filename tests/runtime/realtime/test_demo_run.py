@@ -152,6 +152,7 @@ def test_demo_counts_each_injected_fault(demo_out):
     assert max(r["frame"] for r in log) < 190
 
 
+@pytest.mark.slow
 def test_run_on_a_video_with_the_emulator_stops_cleanly_on_sigterm(demo_out, tmp_path):
     """``omnijax run`` on the demo's recorded omni video, steering an emulated PTZ; SIGTERM part-way:
     the PTZ goes home, the summary and the log are written, the exit code is 0."""
