@@ -149,6 +149,7 @@ def test_foot_scores_are_eq_12_brute_force(paper_detector, seed):
     assert np.all(np.isneginf(ours[~ok]))
 
 
+@pytest.mark.slow
 def test_chi2_variates_against_scipy():
     """n = 200000 draws each; KS at the 0.001 level."""
     key = jax.random.key(0)

@@ -67,7 +67,7 @@ def _truths(world, ts):
 FISHEYE_SLOW = pytest.param("fisheye", marks=pytest.mark.slow)  # a second world to compile: ~30 s
 
 
-@pytest.mark.parametrize("name", ["six", FISHEYE_SLOW])
+@pytest.mark.parametrize("name", [pytest.param("six", marks=pytest.mark.slow), FISHEYE_SLOW])
 def test_truth_foot_is_the_camera_models_projection(request, name):
     """truth's (r_f, theta_f, pixel) against the foundation's world_to_image of the true foot (< 0.01 px),
     and the renderer's inverse mapping (pixel -> ray -> floor) lands on the foot (< 0.01 px)."""
@@ -89,7 +89,7 @@ def test_truth_foot_is_the_camera_models_projection(request, name):
     assert np.max(miss_m * np.abs(px_per_m).max()) < 0.01
 
 
-@pytest.mark.parametrize("name", ["six", FISHEYE_SLOW])
+@pytest.mark.parametrize("name", [pytest.param("six", marks=pytest.mark.slow), FISHEYE_SLOW])
 def test_drawn_silhouette_starts_at_the_body_edge(request, name):
     """Along the radial line through the foot, the first labelled pixel is the body's nearest floor
     point (truth.r_inner) within a pixel; it lies inside r_f by the body radius's image."""

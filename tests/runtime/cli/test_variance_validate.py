@@ -24,7 +24,7 @@ def _variance(capsys, *args):
 
 
 @pytest.mark.parametrize("method", ["autodiff", "analytic", pytest.param("second_order", marks=pytest.mark.slow),
-                                    "montecarlo"])
+                                    pytest.param("montecarlo", marks=pytest.mark.slow)])
 def test_variance_contract(capsys, method):
     extra = ["--rel-tol", "0.05"] if method == "montecarlo" else []
     rep = _variance(capsys, "--foot", "100", "0.7", "--method", method, *extra)
