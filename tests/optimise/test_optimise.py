@@ -225,6 +225,7 @@ def test_shipped_rigs_load(name):
 # The command
 
 
+@pytest.mark.slow
 def test_optimise_writes_the_contract_and_maps(tmp_path, capsys):
     out = tmp_path / "opt"
     code = main(["optimise", "--config", PAPER, "--out", str(out), "--grid-step-m", "0.6", "--landscape", "5",

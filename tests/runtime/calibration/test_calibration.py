@@ -177,6 +177,7 @@ def _run(capsys, *args):
     return code, out, err
 
 
+@pytest.mark.slow
 def test_calibrate_contract_and_round_trip(tmp_path, capsys):
     frame = tmp_path / "frame.png"
     cv2.imwrite(str(frame), disc_frame(center=(320.0, 240.0), radius=220.0))
