@@ -51,6 +51,8 @@ from ._indexing import gather_rgb
 CHANGED = AGREE
 #: A trusted person's detection is a ghost only if the edge before was GHOST_RATIO times the edge now.
 GHOST_RATIO = 4.0
+#: A sample the learning left unsettled is repaired after this many frames still and in a ghost's region.
+UNSETTLED_VOTES = 2.0
 #: Ghost evidence: the sample inside an edge line lies INNER_PX inside it; the samples outside it
 #: FLANK_PX pixels out.
 INNER_PX, FLANK_PX = 1.5, (3.0, 5.0, 7.0)
@@ -184,7 +186,11 @@ def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets
     # nobody claims it; the evidence of one ghost flickers about the edge threshold from frame to frame
     vote = jnp.where(in_ghost & ~people, 1.0, jnp.where(people, -1.0, 0.0))
     ghost = jnp.where(changed, jnp.maximum(life.ghost + vote, 0.0), 0.0)
-    repair = changed & (ghost >= rates.ghost_frames) & (still >= rates.still_frames)
+    # what the learning left unsettled (occupied through a third of its frames or more) holds a ghost
+    # of someone who stood there at the learning's start as often as not: repaired on its first votes
+    unsettled = life.seen < 2.0 / 3.0 * rates.learn_frames - 1e-3
+    quick = unsettled & (ghost >= UNSETTLED_VOTES) & (still >= UNSETTLED_VOTES)
+    repair = changed & (((ghost >= rates.ghost_frames) & (still >= rates.still_frames)) | quick)
     absorb = changed & (still >= rates.absorb_frames) & ~protected
     fix = (repair | absorb) & ok
     free = ok & ~changed & ~occupied

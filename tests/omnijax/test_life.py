@@ -14,7 +14,7 @@ from tests.omnijax.test_detection import _noisy, _paint_person
 
 #: Frames in these tests: a changed sample must stay still STILL frames and lie in a ghost GHOST frames
 #: before it is repaired; what stays still ABSORB frames is absorbed.
-STILL, GHOST, ABSORB = 2, 3, 12
+STILL, GHOST, ABSORB = 2, 5, 12
 
 
 def _rates(adapt_rate=0.05):
@@ -83,6 +83,25 @@ def test_a_ghost_is_repaired(paper_detector, room, trusted):
     assert not any(seen[GHOST + 1:])  # repaired: nothing left
     dets, _ = detect(paper_detector, jnp.asarray(_noisy(rng, base)), life.lines)
     assert not bool(np.asarray(dets.valid).any())
+
+
+def test_a_ghost_the_learning_left_unsettled_is_repaired_at_once(paper_detector, room):
+    """Someone stood through 12 of 30 learning frames and the floor showed in 10 of the rest: the
+    background holds them (the commonest colour) but knows it is unsettled, so their ghost is repaired
+    after UNSETTLED_VOTES frames, not GHOST."""
+    from omnijax.detection._life import UNSETTLED_VOTES
+
+    rng, base, person, _ = room
+    frames = np.stack([_noisy(rng, person if k < 12 else base) for k in range(30)])
+    walker = _noisy(rng, base)
+    walker[np.any(person != base, -1)] = (30, 90, 40)  # someone else there in 8 of the other frames
+    frames[12:20] = walker
+    bg = learn_background(frames)
+    life = start_life(line_background(paper_detector, bg))
+    assert GHOST > UNSETTLED_VOTES + 1
+    life, found, _ = _run(paper_detector, life, [_noisy(rng, base) for _ in range(GHOST + 2)], False, _rates())
+    seen = [bool(v.any()) for v, _ in found]
+    assert seen[0] and not any(seen[int(UNSETTLED_VOTES) + 1:])
 
 
 def test_a_trusted_person_who_stops_stays_and_an_untrusted_object_is_absorbed(paper_detector, room):
