@@ -121,8 +121,9 @@ def sweep(args) -> list[dict]:
 
 
 def table(rows: list[dict]) -> str:
-    head = ("| scene | seed | miss | false alarms | NEES r_f | P(>6.63) | NEES theta_f | P(>6.63) | FA causes | "
-            "miss causes |\n| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | --- |")
+    head = ("| scene | seed | miss | false alarms | NEES r_f | P(>6.63) | NEES theta_f | P(>6.63) | ghost gone (s) | "
+            "standing detected | FA causes | miss causes |\n"
+            "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | --- |")
     out = [head]
     for r in rows:
         n = r["nees"]["all"]
@@ -130,22 +131,27 @@ def table(rows: list[dict]) -> str:
         mi = " ".join(f"{k}:{v}" for k, v in r["miss_causes"].items() if v)
         out.append(f"| {r['scene']} | {r['seed']} | {_f(r['miss_rate'])} | {_f(r['false_alarm_rate'])} | "
                    f"{_f(n.get('r_f_mean'), 2)} | {_f(n.get('r_f_over_6_63'))} | {_f(n.get('theta_f_mean'), 2)} | "
-                   f"{_f(n.get('theta_f_over_6_63'))} | {fa} | {mi} |")
+                   f"{_f(n.get('theta_f_over_6_63'))} | {_f(r.get('ghost_gone_s'), 2)} | "
+                   f"{_f(r.get('standing_detected_rate'))} ({r.get('standing_frames', 0)}) | {fa} | {mi} |")
     return "\n".join(out)
 
 
 def worst_and_median(rows: list[dict]) -> str:
     out = ["| scene | seeds | miss worst (seed) | miss median | FA worst (seed) | FA median | "
-           "NEES r_f median | NEES theta_f median |", "| --- | ---: | --- | ---: | --- | ---: | ---: | ---: |"]
+           "NEES r_f median | NEES theta_f median | ghost gone worst (s) | standing detected worst |",
+           "| --- | ---: | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: |"]
     for scene in dict.fromkeys(r["scene"] for r in rows):
         rs = [r for r in rows if r["scene"] == scene]
         m = max(rs, key=lambda r: r["miss_rate"] or 0)
         f = max(rs, key=lambda r: r["false_alarm_rate"] or 0)
+        stood = [r["standing_detected_rate"] for r in rs if r.get("standing_detected_rate") is not None]
         out.append(f"| {scene} | {len(rs)} | {_f(m['miss_rate'])} ({m['seed']}) | "
                    f"{_f(np.median([r['miss_rate'] or 0 for r in rs]))} | {_f(f['false_alarm_rate'])} ({f['seed']}) | "
                    f"{_f(np.median([r['false_alarm_rate'] or 0 for r in rs]))} | "
                    f"{_f(np.median([r['nees']['all'].get('r_f_mean', np.nan) for r in rs]), 2)} | "
-                   f"{_f(np.median([r['nees']['all'].get('theta_f_mean', np.nan) for r in rs]), 2)} |")
+                   f"{_f(np.median([r['nees']['all'].get('theta_f_mean', np.nan) for r in rs]), 2)} | "
+                   f"{_f(max(r.get('ghost_gone_s', 0.0) for r in rs), 2)} | "
+                   f"{_f(min(stood, default=None))} |")
     return "\n".join(out)
 
 

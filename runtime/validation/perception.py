@@ -34,6 +34,12 @@ misses
   ``far_field``        the foot beyond :data:`FAR_M`
   ``other``
 
+Two figures of the background's life: ``ghost_gone_s``, the longest a ghost was seen after its person
+had walked :data:`LEFT_M` away (from the first processed frame on, for a person who left during the
+learning: per ghost false alarm, the seconds since the last frame anyone stood within LEFT_M of it,
+plus one frame); and ``standing``, how many frames a visible person had stood still for
+:data:`PAUSE_S` or more and in how many of them they were detected.
+
 NEES per matched detection and coordinate: ``(error / sigma)^2`` with the sigma rule's sigma
 (chi-square(1): mean 1, P(> 6.63) = 0.01), overall and per band of the true foot's floor radius
 (:data:`RANGE_BANDS`).
@@ -54,6 +60,8 @@ GATE_M = 0.5
 #: within SITE_M (m); a pause of PAUSE_S (s) or more; two people within SAME_SECTOR_RAD (rad) of
 #: azimuth share a sector; the far field starts FAR_M (m) from the camera axis.
 FRAGMENT_M, SITE_M, PAUSE_S, SAME_SECTOR_RAD, FAR_M = 0.7, 0.6, 1.0, 0.35, 2.7
+#: A ghost's clock starts when its person is LEFT_M (m) away.
+LEFT_M = 1.0
 #: A person counts as standing at a place in the learning frames when there in this share of them.
 LEARNING_SHARE = 0.2
 #: Bands of the true foot's floor radius (m) for the NEES.
@@ -107,6 +115,17 @@ class History:
                    learning_frames=np.asarray(learning_frames, int), fps=float(world["fps"]),
                    moved_furniture=np.asarray(moved_furniture, float).reshape(-1, 2))
 
+    def ghost_age(self, frame: int, xy) -> float:
+        """Seconds up to ``frame`` (inclusive) since everybody was :data:`LEFT_M` or more from ``xy``,
+        counted from the first processed frame; 0 while somebody is nearer."""
+        start = int(self.learning_frames.max()) + 1 if self.learning_frames.size else 0
+        d = np.linalg.norm(self.feet[: frame + 1] - np.asarray(xy)[None, None], axis=-1)
+        near = np.nonzero(np.any(d < LEFT_M, axis=1))[0]
+        if near.size and near[-1] == frame:
+            return 0.0
+        left = near[-1] + 1 if near.size else 0
+        return (frame - max(left, start) + 1) / self.fps
+
     def still_for(self, frame: int, person: int) -> float:
         """Seconds person has stood still up to ``frame`` (0 if moving at it)."""
         run = 0
@@ -154,6 +173,9 @@ class PerceptionScore:
     detections: int = 0
     false_alarms: int = 0
     frames: int = 0
+    ghost_gone_s: float = 0.0
+    standing_frames: int = 0
+    standing_detected: int = 0
     fa_causes: Counter = field(default_factory=Counter)
     miss_causes: Counter = field(default_factory=Counter)
     nees: list = field(default_factory=list)  # (R_m, nees_r, nees_theta)
@@ -193,7 +215,10 @@ class PerceptionScore:
             if not q["foot_visible"] or c in blind:
                 continue
             self.visible += 1
+            standing = history is not None and history.still_for(frame, q["id"]) >= PAUSE_S
+            self.standing_frames += standing
             if c in det_of:
+                self.standing_detected += standing
                 continue
             self.misses += 1
             cause = self._miss_cause(frame, q, persons, det_of, people, unmatched, history)
@@ -204,6 +229,8 @@ class PerceptionScore:
             self.false_alarms += 1
             cause = self._fa_cause(frame, z[k], z, person_of, foot, history)
             self.fa_causes[cause] += 1
+            if cause in ("ghost_learning", "ghost_pause"):
+                self.ghost_gone_s = max(self.ghost_gone_s, history.ghost_age(frame, z[k]))
             out["false"].append({"xy": [round(float(v), 3) for v in z[k]], "cause": cause})
         return out
 
@@ -260,6 +287,9 @@ class PerceptionScore:
                 "false_alarm_rate": self.false_alarms / self.detections if self.detections else None,
                 "fa_causes": {c: self.fa_causes[c] for c in FA_CAUSES},
                 "miss_causes": {c: self.miss_causes[c] for c in MISS_CAUSES},
+                "ghost_gone_s": self.ghost_gone_s, "standing_frames": self.standing_frames,
+                "standing_detected_rate": (self.standing_detected / self.standing_frames
+                                           if self.standing_frames else None),
                 "nees": self.nees_figures()}
 
 

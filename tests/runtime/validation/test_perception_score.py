@@ -1,0 +1,65 @@
+"""The perception scorer (runtime.validation.perception) on hand-made truth: matching, a miss and a
+false alarm with their causes, a ghost's age after its person left, a standing person's frames."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from runtime.validation.perception import History, PerceptionScore, match_feet
+
+FPS = 10.0
+
+
+def _history(feet, moving, learning=(0, 1, 2)):
+    feet = np.asarray(feet, float)
+    return History(feet=feet, moving=np.asarray(moving, bool), floor_like=np.zeros(feet.shape[1], bool),
+                   learning_frames=np.asarray(learning), fps=FPS)
+
+
+def _truth(frame, feet):
+    return {"frame": frame, "persons": [
+        {"id": p, "foot_m": list(xy), "in_image": True, "foot_visible": True, "r_f": 50.0, "theta_f": 0.0}
+        for p, xy in enumerate(feet)]}
+
+
+def _people(n):
+    return [{"r_f": 50.0, "theta_f": 0.0, "theta_l": -0.05, "theta_r": 0.05} for _ in range(n)]
+
+
+def test_match_feet_is_one_to_one_and_gated():
+    z = np.array([[0.0, 0.0], [0.1, 0.0], [5.0, 5.0]])
+    foot = np.array([[0.05, 0.0], [0.3, 0.0]])
+    pairs = sorted(match_feet(z, foot))
+    assert [(r, c) for r, c, _ in pairs] == [(0, 0), (1, 1)]  # least total distance, the far one left out
+
+
+def test_a_ghost_ages_from_when_its_person_left_and_a_standing_person_counts():
+    """Person 0 stands at (2, 0) through the learning (frames 0-2) and frame 3, then is 1 m away from
+    frame 4 on; a detection stays at (2, 0) from frame 4 to 7: a ghost of the learning, seen for 4 frames
+    after its person left (0.4 s at 10 fps). Person 1 stands at (-2, 0) from frame 3 on (still from
+    frame 3: standing, PAUSE_S = 1 s, from frame 12) and is detected in every frame but frame 13."""
+    T = 16
+    feet = np.zeros((T, 2, 2))
+    feet[:, 0] = [2.0, 0.0]
+    feet[4:, 0] = [2.0, 1.5]
+    feet[:, 1] = [-2.0, 0.0]
+    moving = np.zeros((T, 2), bool)
+    moving[:3, 1] = True
+    moving[3:5, 0] = True
+    hist = _history(feet, moving)
+    score = PerceptionScore()
+    for f in range(3, T):
+        z = [feet[f, 0]] + ([[2.0, 0.0]] if 4 <= f <= 7 else []) + ([feet[f, 1]] if f != 13 else [])
+        z = np.array(z)
+        out = score.add_frame(f, _truth(f, feet[f]), _people(len(z)), z, np.ones((len(z), 2)), hist)
+        if f == 5:
+            assert [x["cause"] for x in out["false"]] == ["ghost_learning"]
+        if f == 13:
+            assert [x["id"] for x in out["missed"]] == [1]
+    s = score.summary()
+    assert s["false_alarms"] == 4 and s["fa_causes"]["ghost_learning"] == 4
+    assert s["ghost_gone_s"] == pytest.approx(0.4)
+    assert s["misses"] == 1
+    # standing: person 1 in frames 12-15, person 0 (still again from frame 5) in 14-15; one missed
+    assert s["standing_frames"] == 6 and s["standing_detected_rate"] == pytest.approx(5 / 6)
