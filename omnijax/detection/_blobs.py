@@ -27,7 +27,9 @@ or one behind the other as the camera sees them, and the paper's estimate then f
      step finds the same person again and the next person is sought in what is left.
 3. Two people's feet are at least a shoulder width apart; two detections whose feet are closer
    than :data:`MERGE_M` on the floor are one person's fragments and the weaker goes
-   (:func:`merge_fragments`, the one place where detections are merged).
+   (:func:`merge_fragments`, the one place where detections are merged); so are two on the
+   innermost foot hypothesis (someone under the camera, whose image fans over a wide angle)
+   within the blind disc's diameter.
 """
 
 from __future__ import annotations
@@ -179,10 +181,17 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     return People(**people)
 
 
-def merge_fragments(valid: Bool[Array, " K"], floor_xy: Float[Array, "K 2"]) -> Bool[Array, " K"]:
+def merge_fragments(valid: Bool[Array, " K"], floor_xy: Float[Array, "K 2"], innermost: Bool[Array, " K"] | None = None,
+                    inner_R=0.0) -> Bool[Array, " K"]:
     """``valid`` less every detection whose foot lies within :data:`MERGE_M` of an earlier (stronger)
-    valid one's on the floor."""
+    valid one's on the floor; or, both on the ``innermost`` foot hypothesis (the person reaches into
+    the blind disc under the camera: the foot is somewhere inside the circle of floor radius
+    ``inner_R``, and a person there spans a wide fan of lines that splits into fragments), within
+    the disc's diameter."""
     d = jnp.linalg.norm(floor_xy[:, None] - floor_xy[None], axis=-1)
     idx = jnp.arange(valid.shape[0])
-    beaten = jnp.any(valid[None] & (d < MERGE_M) & (idx[None] < idx[:, None]), axis=1)
+    near = d < MERGE_M
+    if innermost is not None:
+        near = near | (innermost[:, None] & innermost[None] & (d < 2 * inner_R))
+    beaten = jnp.any(valid[None] & near & (idx[None] < idx[:, None]), axis=1)
     return valid & ~beaten

@@ -204,7 +204,9 @@ def detections_of(detector: Detector, people: People) -> Detections:
     sigma_r, sigma_theta = _foot_sigmas(detector, i, people.contrast, width, people.visible)
     theta_f = wrap_2pi(people.centre * step)
     R = polar.hyp_R[i]
-    valid = merge_fragments(people.valid, jnp.stack([R * jnp.cos(theta_f), R * jnp.sin(theta_f)], -1))
+    first = jnp.argmax(polar.hyp_ok)
+    valid = merge_fragments(people.valid, jnp.stack([R * jnp.cos(theta_f), R * jnp.sin(theta_f)], -1),
+                            i == first, polar.hyp_R[first])
     return Detections(
         valid=valid, r_f=polar.hyp_r_f[i], theta_f=theta_f, sigma_r_f=sigma_r, sigma_theta_f=sigma_theta,
         contrast=people.contrast, r_in=polar.radii[i], r_out=polar.radii[0] + polar.hyp_out[i],

@@ -246,6 +246,22 @@ def test_detects_a_painted_person(paper_detector, painted, radius, theta):
     assert step / math.sqrt(24) * (1 - 1e-9) <= float(d.sigma_theta_f[k]) < 2 * step  # one person: no excess width
 
 
+def test_fragments_merge_by_floor_distance_and_under_the_camera():
+    """Feet closer than MERGE_M: the weaker (later) goes; two on the innermost foot hypothesis (a
+    person under the camera, fanned over a wide angle) merge within the blind disc's diameter, two
+    elsewhere at that distance do not."""
+    from omnijax.detection import merge_fragments
+    from omnijax.detection._blobs import MERGE_M
+
+    valid = jnp.ones(4, bool)
+    xy = jnp.array([[0.5, 0.0], [0.5, MERGE_M - 0.05], [-0.45, 0.2], [2.0, 2.0]])
+    np.testing.assert_array_equal(np.asarray(merge_fragments(valid, xy)), [True, False, True, True])
+    inner = jnp.array([True, False, True, False])
+    got = merge_fragments(valid, xy, inner, 0.5)  # 0.97 m apart, both innermost: inside the 1 m diameter
+    np.testing.assert_array_equal(np.asarray(got), [True, False, False, True])
+    np.testing.assert_array_equal(np.asarray(merge_fragments(valid, xy, inner, 0.45)), [True, False, True, True])
+
+
 @pytest.mark.parametrize("layout", ["side by side", "one behind the other"])
 def test_two_people_in_one_sector_are_two_detections(paper_detector, painted, layout):
     """Two painted people in one psi1 sector (the paper's detector finds one foot there): side by side,
