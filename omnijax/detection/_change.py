@@ -59,35 +59,25 @@ def estimate_sensor_noise(frames: UInt8[ArrayLike, "N H W 3"], floor=0.5, pool: 
 AGREE = 13.8155
 
 
-#: Share of the pixels whose learning frames may lack a majority colour (:func:`learn_background`
-#: seeks their commonest colour; beyond it, the rest keep the median's).
-MODE_SHARE = 1.0 / 16.0
-
-
 @jax.jit
 def learn_background(frames: UInt8[ArrayLike, "N H W 3"], sigma=None, floor=0.5) -> Background:
     """Background from N frames: per pixel, the mean of the samples whose chromaticity agrees with the
-    pixel's commonest colour (d^2 of eq 6-7 between the two below :data:`AGREE`; people walking or
-    standing through part of the frames are left out, and so is nothing that only changes the light's
+    median colour's (d^2 of eq 6-7 between the two below :data:`AGREE`; people walking or standing
+    through less than half of the frames are left out, and so is nothing that only changes the light's
     intensity: a lamp switching or a shadow, under one spectrum). ``var_factor = 1 / kept``, so a
     pixel whose frames agreed less often (``kept`` small: it was occupied for a while) is known to be
-    less certain; :func:`learned` says which pixels agreed in most frames.
-
-    The commonest colour is the per-channel median where at least half of the frames agree with it
-    (a pixel free in most frames). Where they do not (people stood or passed there through half of
-    the frames or more, often several people of different colours), the channel-wise median is a
-    mixture no frame showed, and a background of it is a ghost that no frame repairs: there
-    (:func:`_commonest`, up to :data:`MODE_SHARE` of the pixels) it is the frame colour that agrees
-    with the most frames, the latest of equals (what the room looks like last is what is compared
-    next). A clipped sample (a channel at 0 or 255: a white shirt under a lamp) agrees with any colour,
-    since d^2 holds no evidence there; it is kept out of the mean and of the vote, unless every frame
-    of the pixel was clipped.
+    less certain; :func:`learned` says which pixels agreed in most frames. Where no colour has half
+    of the frames the median is a mixture none of them showed; that is left as it is (a change
+    against the floor and against whoever stands there at the end), and the background's life
+    repairs its ghost at once (:mod:`omnijax.detection._life`: unsettled samples). A clipped sample
+    (a channel at 0 or 255: a white shirt under a lamp) agrees with any colour, since d^2 holds no
+    evidence there; it is kept out of the mean unless every frame of the pixel was clipped.
 
     ``sigma`` (grey levels, scalar or per pixel) defaults to :func:`estimate_sensor_noise` of
     the frames with the given ``floor``.
     """
     f = jnp.asarray(frames, jnp.float32)
-    N, H, W = f.shape[:3]
+    H, W = f.shape[1:3]
     sigma = estimate_sensor_noise(frames, floor) if sigma is None else jnp.broadcast_to(
         jnp.asarray(sigma, jnp.float32), (H, W))
     med = _temporal_median(jnp.asarray(frames))
@@ -95,35 +85,11 @@ def learn_background(frames: UInt8[ArrayLike, "N H W 3"], sigma=None, floor=0.5)
     # where every frame was clipped
     unclipped = _inside(_planes(f), 0.5, 254.5)
     unclipped = unclipped | ~unclipped.any(0)
-    agree = (change_measure(f, jnp.broadcast_to(med, f.shape), 1.0, sigma) <= AGREE) & unclipped
-    centre = _commonest(f, sigma, unclipped, med, 2 * agree.sum(0) < unclipped.sum(0))
-    keep = ((change_measure(f, jnp.broadcast_to(centre, f.shape), 1.0, sigma) <= AGREE) & unclipped)[..., None]
+    keep = ((change_measure(f, jnp.broadcast_to(med, f.shape), 1.0, sigma) <= AGREE) & unclipped)[..., None]
     n = jnp.maximum(keep.sum(0), 1)
     mean = jnp.where(keep, f, 0.0).sum(0) / n
-    mean = jnp.where(keep.any(0), mean, centre)
+    mean = jnp.where(keep.any(0), mean, med)
     return Background(mean=mean, var_factor=1.0 / n[..., 0].astype(jnp.float32), sigma=sigma)
-
-
-def _commonest(f: Float[Array, "N H W 3"], sigma: Float[Array, "H W"], unclipped: Bool[Array, "N H W"],
-               med: Float[Array, "H W 3"], no_majority: Bool[Array, "H W"]) -> Float[Array, "H W 3"]:
-    """``med`` with the pixels of ``no_majority`` (the first :data:`MODE_SHARE` of the image's pixels
-    among them) replaced by the ``unclipped`` frame colour that agrees with the most of that pixel's
-    unclipped frames, the latest of equals."""
-    N, H, W = f.shape[:3]
-    cap = max(1, int(H * W * MODE_SHARE))
-    (idx,) = jnp.nonzero(no_majority.reshape(-1), size=cap, fill_value=H * W)
-    use = idx < H * W
-    safe = jnp.where(use, idx, 0)
-    px = f.reshape(N, H * W, 3)[:, safe]  # (N, cap, 3)
-    sg = sigma.reshape(-1)[safe]
-    ok = unclipped.reshape(N, H * W)[:, safe]
-    shape = (N, N, cap, 3)  # candidate, frame, pixel
-    d2 = change_measure(jnp.broadcast_to(px[:, None], shape), jnp.broadcast_to(px[None], shape), 1.0, sg)
-    pairs = (d2 <= AGREE) & ok[:, None] & ok[None]
-    score = pairs.sum(1) + jnp.arange(N)[:, None] / (N + 1.0)  # later frames win ties
-    best = jnp.take_along_axis(px, jnp.argmax(score, 0)[None, :, None], 0)[0]  # (cap, 3)
-    flat = med.reshape(-1, 3)
-    return flat.at[jnp.where(use, idx, H * W)].set(best, mode="drop").reshape(H, W, 3)
 
 
 def learned(var_factor: Float[ArrayLike, "*b"], frames: int, share: float = 2.0 / 3.0) -> Bool[Array, "*b"]:

@@ -188,8 +188,11 @@ def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets
     ghost = jnp.where(changed, jnp.maximum(life.ghost + vote, 0.0), 0.0)
     # what the learning left unsettled (occupied through a third of its frames or more) holds a ghost
     # of someone who stood there at the learning's start as often as not: repaired on its first votes
+    # when the ghost shows both signs (an edge in the background, none now); someone standing there
+    # now, learnt as the floor, has no edge in the background (and keeps the slow rule)
     unsettled = life.seen < 2.0 / 3.0 * rates.learn_frames - 1e-3
-    quick = unsettled & (ghost >= UNSETTLED_VOTES) & (still >= UNSETTLED_VOTES)
+    quick = (unsettled & regions(dets, valid & sure_ghost, shape) & (ghost >= UNSETTLED_VOTES)
+             & (still >= UNSETTLED_VOTES))
     repair = changed & (((ghost >= rates.ghost_frames) & (still >= rates.still_frames)) | quick)
     absorb = changed & (still >= rates.absorb_frames) & ~protected
     fix = (repair | absorb) & ok

@@ -68,22 +68,6 @@ def test_background_ignores_people_walking_through():
     assert np.abs(np.asarray(bg.mean)[20:40, 20:40] - base[20:40, 20:40]).max() < 2.0
 
 
-def test_background_without_a_majority_is_a_colour_the_frames_showed():
-    """Two people of different colours stand in 13 and 4 of 30 frames, the floor shows in 13 (the last
-    ones): no colour has half, the channel-wise median is a mixture none of the frames showed (a ghost
-    no frame repairs); the background is the floor, the commonest colour, the latest of equals."""
-    rng = np.random.default_rng(23)
-    base = _textured(rng, 128, 128)  # 400 such pixels: within MODE_SHARE of 16,384
-    frames = np.stack([_noisy(rng, base) for _ in range(30)])
-    frames[:13, 20:40, 20:40] = (40, 24, 10)
-    frames[13:17, 20:40, 20:40] = (11, 22, 50)
-    mixed = np.median(frames[:, 20:40, 20:40].astype(float), 0)
-    assert float(np.asarray(change_measure(mixed, base[20:40, 20:40], 1.0, 1.5)).min()) > 13.8  # the old mix: a change
-    bg = learn_background(frames)
-    assert np.abs(np.asarray(bg.mean)[20:40, 20:40] - base[20:40, 20:40]).max() < 2.0
-    assert 1.0 / float(np.asarray(bg.var_factor)[30, 30]) == pytest.approx(13)
-
-
 def test_background_leaves_clipped_samples_out():
     """A white shirt clips the pixels in 8 of 30 frames: clipped samples carry no chromaticity (they
     agree with anything), and they stay out of the mean."""
