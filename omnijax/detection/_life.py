@@ -24,6 +24,9 @@ call per frame (:func:`live_step`), after detection, with the frame's d^2 (the d
    (a detection judged no ghost), none while no detection claims it; a ghost's evidence flickers
    about the threshold from frame to frame, and a run of ghost frames would be broken by each
    flicker.
+   A sample the learning left unsettled (kept in fewer than two thirds of its frames: someone
+   stood there through a third of them) is repaired after :data:`UNSETTLED_VOTES` such frames when
+   the ghost shows both signs (an edge in the background, none now): the ghosts of the learning.
 3. **Absorption**: a sample that has changed and stayed still for ``absorb_frames`` outside the
    region of every trusted person is learnt as it is now (a chair moved and left, a coat dropped).
    A person who stops is in a trusted person's region and is never absorbed.
