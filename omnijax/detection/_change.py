@@ -92,7 +92,8 @@ def learn_background(frames: UInt8[ArrayLike, "N H W 3"], sigma=None, floor=0.5)
     return Background(mean=mean, var_factor=1.0 / n[..., 0].astype(jnp.float32), sigma=sigma)
 
 
-def learned(var_factor: Float[ArrayLike, "*b"], frames: int, share: float = 2.0 / 3.0) -> Bool[Array, "*b"]:
+def learned(var_factor: Float[ArrayLike, "*b"], frames: float | ArrayLike,
+            share: float = 2.0 / 3.0) -> Bool[Array, "*b"]:
     """Samples of a background learnt from ``frames`` frames whose frames agreed in at least ``share``
     of them (``1 / var_factor`` of them were kept): certainly background. The others were occupied
     for more than a third of the learning window; the background's life learns them as they are seen

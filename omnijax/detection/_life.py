@@ -45,7 +45,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, UInt8
 
-from ._change import AGREE, change_measure
+from ._change import AGREE, change_measure, learned
 from ._detector import Detections, Detector, LineBackground, lines_from
 from ._indexing import gather_rgb
 
@@ -193,7 +193,7 @@ def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets
     # of someone who stood there at the learning's start as often as not: repaired on its first votes
     # when the ghost shows both signs (an edge in the background, none now); someone standing there
     # now, learnt as the floor, has no edge in the background (and keeps the slow rule)
-    unsettled = life.seen < 2.0 / 3.0 * rates.learn_frames - 1e-3
+    unsettled = ~learned(1.0 / life.seen, rates.learn_frames)
     quick = (unsettled & regions(dets, valid & sure_ghost, shape) & (ghost >= UNSETTLED_VOTES)
              & (still >= UNSETTLED_VOTES))
     repair = changed & (((ghost >= rates.ghost_frames) & (still >= rates.still_frames)) | quick)
@@ -215,4 +215,4 @@ def learned_share(detector: Detector, life: Life, frames: float) -> Array:
     """Share of the polar samples learnt from at least two thirds of ``frames`` frames (the learning's
     count): the floor the background is sure of."""
     ok = detector.polar.line_ok
-    return jnp.sum(ok & (life.seen >= 2.0 / 3.0 * frames - 1e-3)) / jnp.maximum(jnp.sum(ok), 1)
+    return jnp.sum(ok & learned(1.0 / life.seen, frames)) / jnp.maximum(jnp.sum(ok), 1)

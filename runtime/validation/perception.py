@@ -128,10 +128,12 @@ class History:
 
     def still_for(self, frame: int, person: int) -> float:
         """Seconds person has stood still up to ``frame`` (0 if moving at it)."""
-        run = 0
-        while frame - run >= 0 and not self.moving[frame - run, person]:
-            run += 1
-        return run / self.fps
+        if getattr(self, "_still_run", None) is None:  # frames still up to each frame, once per history
+            run = np.zeros(self.moving.shape, int)
+            for t in range(len(run)):
+                run[t] = np.where(self.moving[t], 0, (run[t - 1] if t else 0) + 1)
+            self._still_run = run
+        return self._still_run[frame, person] / self.fps
 
     def learnt_here(self, xy) -> bool:
         f = self.learning_frames
