@@ -217,7 +217,7 @@ class PerceptionScore:
             if not q["foot_visible"] or c in blind:
                 continue
             self.visible += 1
-            standing = history is not None and history.still_for(frame, q["id"]) >= PAUSE_S
+            standing = bool(history is not None and history.still_for(frame, q["id"]) >= PAUSE_S)
             self.standing_frames += standing
             if c in det_of:
                 self.standing_detected += standing
