@@ -87,7 +87,8 @@ def run_scenario(name: str, n_frames: int, measure: str, seed: int, stride: int 
         keeper.update(f.image, d, trace.d2, np.zeros(d.valid.shape, bool))
         tr = f.truth
         valid = np.nonzero(np.asarray(d.valid))[0]
-        rule_r, rule_t = (np.asarray(a) for a in detection_sigmas(rig, d.sigma_r_f, d.sigma_theta_f))
+        rule_r, rule_t = (np.asarray(a) for a in detection_sigmas(rig, d.sigma_r_f, d.sigma_theta_f, d.bound_r_f,
+                                                                                  d.bound_theta_f))
         used = set()
         th_all = np.asarray(tr.theta_f)
         for p in range(th_all.shape[0]):

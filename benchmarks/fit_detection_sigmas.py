@@ -2,12 +2,13 @@
 
 Each detection's sigma handed to the pointing covariance is
 
-    sigma_r_f^2     = (sigma_gain_r_f     * detector's sigma_r_f)^2     + sigma_extra_r_f^2
-    sigma_theta_f^2 = (sigma_gain_theta_f * detector's sigma_theta_f)^2 + sigma_extra_theta_f^2
+    sigma_r_f^2     = (sigma_gain_r_f     * detector's sigma_r_f)^2     + bound_r_f^2     + sigma_extra_r_f^2
+    sigma_theta_f^2 = (sigma_gain_theta_f * detector's sigma_theta_f)^2 + bound_theta_f^2 + sigma_extra_theta_f^2
 
 (``[detection]`` keys; the detector's sigmas carry the per-detection quality: its foot Monte Carlo
 for the contrast and radius, and the sector's width beyond one person's for merged sectors and
-partial occlusion). This script reads pairs of ``omnijax render`` and ``omnijax detect`` output
+partial occlusion; the bound parts, a foot the detector could not see, are added as they are).
+This script reads pairs of ``omnijax render`` and ``omnijax detect`` output
 folders, matches every visible person to the detection whose sector holds them (the convention of
 benchmarks/detection_accuracy.py: the true foot azimuth within half the sector's width + 0.05 rad;
 isolated = no other person within 0.35 rad), and
@@ -95,9 +96,11 @@ def matched(render_dir: Path, detect_dir: Path) -> dict[str, np.ndarray]:
                 rows.append((q["r_f"] - p["r_f"], float(wrap_pi(q["theta_f"] - p["theta_f"])),
                              q.get("detector_sigma_r_f", q["sigma_r_f"]),
                              q.get("detector_sigma_theta_f", q["sigma_theta_f"]),
-                             float(others.min(initial=math.inf) > ISOLATED)))
-    a = np.array(rows, float).reshape(-1, 5)
-    return {"e_r": a[:, 0], "e_t": a[:, 1], "s_r": a[:, 2], "s_t": a[:, 3], "isolated": a[:, 4] > 0}
+                             float(others.min(initial=math.inf) > ISOLATED),
+                             q.get("detector_bound_r_f", 0.0), q.get("detector_bound_theta_f", 0.0)))
+    a = np.array(rows, float).reshape(-1, 7)
+    return {"e_r": a[:, 0], "e_t": a[:, 1], "s_r": a[:, 2], "s_t": a[:, 3], "isolated": a[:, 4] > 0,
+            "b_r": a[:, 5], "b_t": a[:, 6]}
 
 
 def pooled(pairs: list[tuple[Path, Path]]) -> dict[str, np.ndarray]:
@@ -105,15 +108,16 @@ def pooled(pairs: list[tuple[Path, Path]]) -> dict[str, np.ndarray]:
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
-def fit_component(e: np.ndarray, s: np.ndarray, outliers: bool = False) -> tuple[float, float, float]:
+def fit_component(e: np.ndarray, s: np.ndarray, bound: np.ndarray | float = 0.0,
+                  outliers: bool = False) -> tuple[float, float, float]:
     """(gain, extra, outlier share) maximising the likelihood of errors ``e`` under a Gaussian with
-    sigma^2 = (gain s)^2 + extra^2; with ``outliers``, mixed with a uniform outlier over the errors'
+    sigma^2 = (gain s)^2 + bound^2 + extra^2; with ``outliers``, mixed with a uniform outlier over the errors'
     range. Without (the default), every error counts, so the NEES's mean is honest over all
     detections, gross ones included (what the zoom must survive); with, the fit describes the clean
     core and the outlier share says how much the detector's quality features do not flag."""
     width = 2 * np.max(np.abs(e))
     def nll(p):
-        var = np.exp(2 * p[0]) * s**2 + np.exp(2 * p[1])
+        var = np.exp(2 * p[0]) * s**2 + bound**2 + np.exp(2 * p[1])
         eps = 1 / (1 + np.exp(-p[2])) if outliers else 0.0
         dens = (1 - eps) * np.exp(-0.5 * e**2 / var) / np.sqrt(2 * np.pi * var) + eps / width
         return -np.sum(np.log(dens))
@@ -127,9 +131,9 @@ def from_records(paths: list[Path]) -> dict[str, np.ndarray]:
     """Matched detections written by ``perception_sweep.py --records`` (its floor-gated matching):
     the same keys as :func:`matched`, ``isolated`` all true (the sweep's records do not say)."""
     rows = [r for p in paths for recs in json.loads(p.read_text()).values() for r in recs]
-    a = np.array(rows, float).reshape(-1, 5)
+    a = np.array([list(r) + [0.0] * (7 - len(r)) for r in rows], float).reshape(-1, 7)  # older records: no bounds
     return {"e_r": a[:, 1], "e_t": a[:, 2], "s_r": a[:, 3], "s_t": a[:, 4], "isolated": np.ones(len(a), bool),
-            "R": a[:, 0]}
+            "R": a[:, 0], "b_r": a[:, 5], "b_t": a[:, 6]}
 
 
 def nees_figures(e: np.ndarray, s: np.ndarray) -> dict:
@@ -142,7 +146,7 @@ def nees_figures(e: np.ndarray, s: np.ndarray) -> dict:
 def score(rig, data: dict[str, np.ndarray]) -> dict:
     from omnijax.aiming import detection_sigmas
 
-    s_r, s_t = (np.asarray(a) for a in detection_sigmas(rig, data["s_r"], data["s_t"]))
+    s_r, s_t = (np.asarray(a) for a in detection_sigmas(rig, data["s_r"], data["s_t"], data["b_r"], data["b_t"]))
     out = {}
     for name, sel in (("all", np.ones_like(data["isolated"])), ("isolated", data["isolated"])):
         out[name] = {"r_f": nees_figures(data["e_r"][sel], s_r[sel]),
@@ -174,8 +178,8 @@ def main() -> int:
             return 0
     if args.mode == "fit":
         data = data if args.records else pooled(pairs)
-        g_r, x_r, o_r = fit_component(data["e_r"], data["s_r"], args.outliers)
-        g_t, x_t, o_t = fit_component(data["e_t"], data["s_t"], args.outliers)
+        g_r, x_r, o_r = fit_component(data["e_r"], data["s_r"], data["b_r"], args.outliers)
+        g_t, x_t, o_t = fit_component(data["e_t"], data["s_t"], data["b_t"], args.outliers)
         print(json.dumps({"detections": int(data["e_r"].size), "isolated": int(data["isolated"].sum()),
                           "outlier_share_r_f": o_r, "outlier_share_theta_f": o_t}))
         print(f"sigma_gain_r_f = {g_r:.4g}\nsigma_extra_r_f = {x_r:.4g}\n"

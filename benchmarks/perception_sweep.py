@@ -52,8 +52,9 @@ def floor_and_sigmas(rig, people: list[dict]) -> tuple[np.ndarray, np.ndarray]:
     t = np.array([p["theta_f"] for p in people])
     s_r = np.array([p.get("detector_sigma_r_f", p["sigma_r_f"]) for p in people])
     s_t = np.array([p.get("detector_sigma_theta_f", p["sigma_theta_f"]) for p in people])
-    z, _ = floor_from_detections(rig, r, t, s_r, s_t)
-    sr, st = detection_sigmas(rig, s_r, s_t)
+    b_r, b_t = (np.array([p.get(f"detector_bound_{k}", 0.0) for p in people]) for k in ("r_f", "theta_f"))
+    z, _ = floor_from_detections(rig, r, t, s_r, s_t, b_r, b_t)
+    sr, st = detection_sigmas(rig, s_r, s_t, b_r, b_t)
     return np.asarray(z), np.stack([np.asarray(sr), np.asarray(st)], -1)
 
 
@@ -172,7 +173,7 @@ def main() -> int:
         p.add_argument("--json", type=Path, help="write every row here")
         p.add_argument("--records", type=Path,
                        help="write every matched detection here (floor radius m, r_f error px, theta_f error rad, "
-                            "the detector's sigmas): what fit_detection_sigmas.py --records fits")
+                            "the detector's sigmas and bound parts): what fit_detection_sigmas.py --records fits")
     args = ap.parse_args()
     rows = sweep(args) if args.mode == "sweep" else folders(args)
     print(table(rows))

@@ -70,34 +70,39 @@ def _rules(rig: Rig, rules) -> tuple[str, ...]:
     return out
 
 
-def detection_sigmas(rig: Rig, sigma_r_f=None, sigma_theta_f=None) -> tuple[Array, Array]:
+def detection_sigmas(rig: Rig, sigma_r_f=None, sigma_theta_f=None, bound_r_f=0.0, bound_theta_f=0.0
+                     ) -> tuple[Array, Array]:
     """The sigma rule: the (sigma_r_f px, sigma_theta_f rad) handed to the covariance for a detection.
 
-    ``sqrt((gain * detector's sigma)^2 + extra^2)`` per coordinate, with the rig's ``[detection]``
+    ``sqrt((gain * detector's sigma)^2 + bound^2 + extra^2)`` per coordinate, with the rig's ``[detection]``
     ``sigma_gain_*`` and ``sigma_extra_*``: the detector's sigmas carry each detection's quality (the
     foot's Monte Carlo at its contrast and radius; a sector wider or narrower than one person there:
     two people or a ghost in it, partial occlusion; the foot at the sampled range's edge), the gain
     and the extra term calibrate them against the synthetic world's truth
-    (benchmarks/fit_detection_sigmas.py; docs/detection.md, "Honest sigmas"). ``None`` (an aim without
+    (benchmarks/fit_detection_sigmas.py; docs/detection.md, "Honest sigmas"). The detector's bound
+    part (``Detections.bound_r_f``, ``bound_theta_f``: a foot it could not see, of a person reaching
+    into the blind disc under the camera or past the image's edge) is added as it is: it is a spread
+    of where the foot can be, not a quality the gain calibrates. ``None`` (an aim without
     a detection: the layout optimiser, calibration points): the rig's ``sigma_r_f``,
     ``sigma_theta_f`` as they are. Broadcasts.
     """
     d = rig.detection
-    s_r = d.sigma_r_f if sigma_r_f is None else jnp.hypot(d.sigma_gain_r_f * sigma_r_f, d.sigma_extra_r_f)
+    rule = lambda gain, s, bound, extra: jnp.sqrt((gain * s) ** 2 + jnp.asarray(bound) ** 2 + extra**2)
+    s_r = d.sigma_r_f if sigma_r_f is None else rule(d.sigma_gain_r_f, sigma_r_f, bound_r_f, d.sigma_extra_r_f)
     s_t = (d.sigma_theta_f if sigma_theta_f is None
-           else jnp.hypot(d.sigma_gain_theta_f * sigma_theta_f, d.sigma_extra_theta_f))
+           else rule(d.sigma_gain_theta_f, sigma_theta_f, bound_theta_f, d.sigma_extra_theta_f))
     return jnp.asarray(s_r, float), jnp.asarray(s_t, float)
 
 
 @jax.jit
-def floor_from_detections(rig: Rig, r_f, theta_f, sigma_r_f, sigma_theta_f
+def floor_from_detections(rig: Rig, r_f, theta_f, sigma_r_f, sigma_theta_f, bound_r_f=0.0, bound_theta_f=0.0
                           ) -> tuple[Float[Array, "*b 2"], Float[Array, "*b 2 2"]]:
     """Floor positions (m) of detections and their covariance under :func:`detection_sigmas` (eq 1).
 
     Only detection noise enters (calibration errors are the same at every frame and are added
     when pointing). Broadcasts over detections.
     """
-    s_r, s_t = detection_sigmas(rig, sigma_r_f, sigma_theta_f)
+    s_r, s_t = detection_sigmas(rig, sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f)
     return floor_measurement(rig, r_f, theta_f, s_r, s_t)
 
 
@@ -138,10 +143,10 @@ def aim_from_image(rig: Rig, r_f, theta_f, cov_image: Float[Array, "2 2"],
 
 @functools.partial(jax.jit, static_argnames="rules")
 def aim_detection(rig: Rig, r_f, theta_f, sigma_r_f=None, sigma_theta_f=None,
-                  rules: tuple[str, ...] | None = None, zero_sigma=None) -> Aim:
-    """Pan/tilt/zoom for a detection at (``r_f`` px, ``theta_f`` rad) with the detector's sigmas,
-    under the sigma rule (:func:`detection_sigmas`; ``None``: the rig's defaults)."""
-    s_r, s_t = detection_sigmas(rig, sigma_r_f, sigma_theta_f)
+                  rules: tuple[str, ...] | None = None, zero_sigma=None, bound_r_f=0.0, bound_theta_f=0.0) -> Aim:
+    """Pan/tilt/zoom for a detection at (``r_f`` px, ``theta_f`` rad) with the detector's sigmas
+    (and bound parts), under the sigma rule (:func:`detection_sigmas`; ``None``: the rig's defaults)."""
+    s_r, s_t = detection_sigmas(rig, sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f)
     return aim_from_image(rig, r_f, theta_f, jnp.diag(jnp.stack([s_r**2, s_t**2])), rules, zero_sigma)
 
 

@@ -106,7 +106,10 @@ class Detections(eqx.Module):
     """Up to K people (``valid`` marks the real ones), strongest first.
 
     ``r_f`` (px) is the image radius of the person's axis foot, ``theta_f`` (rad) the centre of
-    the person's run of lines; ``sigma_r_f``, ``sigma_theta_f`` their errors (:func:`_foot_sigmas`);
+    the person's run of lines; ``sigma_r_f``, ``sigma_theta_f`` their errors (:func:`_foot_sigmas`):
+    the quality part, which the sigma rule scales, and ``bound_r_f``, ``bound_theta_f`` the bound
+    part of a foot the detector could not see (the person reaches past the sampled radii), which it
+    adds as it is (:func:`omnijax.aiming.detection_sigmas`);
     ``contrast`` is the non-centrality per sample measured on the profile (over the samples no
     stronger person explained); ``r_in``/``r_out`` (px) the person's radial extent (the foot
     hypothesis's); ``theta_l``/``theta_r`` the run's edges; ``peak`` the profile's d^2 excess;
@@ -120,6 +123,8 @@ class Detections(eqx.Module):
     theta_f: Float[Array, " K"]
     sigma_r_f: Float[Array, " K"]
     sigma_theta_f: Float[Array, " K"]
+    bound_r_f: Float[Array, " K"]
+    bound_theta_f: Float[Array, " K"]
     contrast: Float[Array, " K"]
     r_in: Float[Array, " K"]
     r_out: Float[Array, " K"]
@@ -147,8 +152,16 @@ def line_change(detector: Detector, frame: UInt8[Array, "H W 3"], lines: LineBac
     return jnp.where(detector.polar.line_ok, d2, 0.0)
 
 
-def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0) -> tuple[Array, Array]:
-    """``(sigma_r_f, sigma_theta_f)`` of a detection whose foot hypothesis is ``i``.
+#: Azimuth sigma (rad) of a person who reaches into the blind disc under the camera: the foot is
+#: anywhere in the disc of radius rho inside the first foot hypothesis (uniform: rho / 2 a side), seen
+#: from the hypothesis at about rho (measured on tuning seeds 6201-6203, every person under the camera:
+#: |error| median 0.37 rad, 90 % 0.75 rad; r_f error RMS 7.2 px against r_1 / sqrt(6) = 7.9 px;
+#: docs/detection.md, "Honest sigmas").
+BLIND_THETA_SIGMA = 0.5
+
+
+def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0) -> tuple[Array, Array, Array, Array]:
+    """``(sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f)`` of a detection whose foot hypothesis is ``i``.
 
     One upright person's image is symmetric about the foot's azimuth, so the run's centre is
     unbiased and its error is where the two edges fall inside their lines' bins of width
@@ -164,9 +177,16 @@ def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0) -> tuple[A
       visible part is anywhere along the person (``deficit^2 / 12``);
     - either way the centre line may miss the person's axis, so the foot's radius takes a share
       ``min((excess + deficit) / width_1, 1)`` of a uniform spread over the person's extent on top
-      of the Monte Carlo ``sigma_r_f``; the whole of it when the foot hypothesis is the first or
-      last possible one (the person reaches past the sampled radii: the image's edge or the blind
-      centre); and the share of the person's window that a stronger person hid (``1 - visible``).
+      of the Monte Carlo ``sigma_r_f``, and the share of the person's window that a stronger
+      person hid (``1 - visible``).
+
+    These are the quality part, which the sigma rule's fitted gain scales. The bound part is a foot
+    the detector did not see: when the foot hypothesis is the first or last possible one (the person
+    reaches past the sampled radii: the blind centre or the image's edge; the quality part keeps the
+    Monte Carlo term): at the last, the foot is anywhere along the person's extent (``bound_r_f^2 =
+    extent^2 / 12``); at the first, under the camera, anywhere in the blind disc inside the first
+    hypothesis's image radius ``r_1`` (uniform over the disc: ``bound_r_f^2 = r_1^2 / 6`` about
+    ``r_1``, ``bound_theta_f`` = :data:`BLIND_THETA_SIGMA`); the rule adds it as it is.
     """
     polar = detector.polar
     step = 2 * jnp.pi / polar.n_theta
@@ -178,9 +198,14 @@ def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0) -> tuple[A
     ok = polar.hyp_ok
     first, last = jnp.argmax(ok), ok.shape[0] - 1 - jnp.argmax(ok[::-1])
     edge = (i <= first) | (i >= last)
-    share = jnp.where(edge, 1.0, jnp.minimum((excess + deficit) / one + (1.0 - visible), 1.0))
+    share = jnp.where(edge, 0.0, jnp.minimum((excess + deficit) / one + (1.0 - visible), 1.0))
     sigma_r = jnp.sqrt(foot_sigma_lookup(detector.foot_sigma, i, contrast) ** 2 + share * extent**2 / 12)
-    return sigma_r, sigma_theta
+    blind = i <= first
+    # under the camera: the foot uniform over the blind disc of image radius r_1 (the first hypothesis's),
+    # reported at r_1: E[(r_1 - r)^2] = r_1^2 / 6; at the image's edge: anywhere along the extent
+    bound_r = jnp.where(blind, polar.hyp_r_f[i] / jnp.sqrt(6.0), jnp.where(edge, extent / jnp.sqrt(12.0), 0.0))
+    bound_theta = jnp.where(blind, BLIND_THETA_SIGMA, 0.0)
+    return sigma_r, sigma_theta, bound_r, bound_theta
 
 
 def find_sectors(detector: Detector, M: Float[Array, " T"]):
@@ -201,7 +226,7 @@ def detections_of(detector: Detector, people: People) -> Detections:
     step = 2 * jnp.pi / polar.n_theta
     i = people.i
     width = (people.last - people.first + 1) * step
-    sigma_r, sigma_theta = _foot_sigmas(detector, i, people.contrast, width, people.visible)
+    sigma_r, sigma_theta, bound_r, bound_theta = _foot_sigmas(detector, i, people.contrast, width, people.visible)
     theta_f = wrap_2pi(people.centre * step)
     R = polar.hyp_R[i]
     first = jnp.argmax(polar.hyp_ok)
@@ -209,6 +234,7 @@ def detections_of(detector: Detector, people: People) -> Detections:
                             i == first, polar.hyp_R[first])
     return Detections(
         valid=valid, r_f=polar.hyp_r_f[i], theta_f=theta_f, sigma_r_f=sigma_r, sigma_theta_f=sigma_theta,
+        bound_r_f=bound_r, bound_theta_f=bound_theta,
         contrast=people.contrast, r_in=polar.radii[i], r_out=polar.radii[0] + polar.hyp_out[i],
         theta_l=wrap_2pi(people.first * step), theta_r=wrap_2pi(people.last * step), peak=people.excess,
         region=people.explained,

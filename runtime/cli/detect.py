@@ -20,8 +20,9 @@ absorb_s, a person who stops kept, the rest drifting; docs/detection.md). This i
 same pipeline `run` and `demo` use.
 
 Writes DIR/detections.jsonl (one line per frame: each person's r_f, theta_f, their
-sigmas under the sigma rule (the detector's own as detector_sigma_*: see the rig's
-[detection] sigma_gain_* / sigma_extra_*), contrast, sector edges, foot and head pixels), DIR/overlay_NNNNN.png every
+sigmas under the sigma rule (the detector's own as detector_sigma_*, and detector_bound_* for a
+foot it could not see, under the camera or past the image's edge: see the rig's [detection]
+sigma_gain_* / sigma_extra_*), contrast, sector edges, foot and head pixels), DIR/overlay_NNNNN.png every
 --overlay-every frames (sectors red, centre lines green, the person's extent yellow,
 foot cyan, head white) and DIR/summary.json (frames, the learning: which frames and how
 much of the floor it settled, the background's life: ghost detections repaired).

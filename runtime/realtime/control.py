@@ -41,7 +41,8 @@ def perceive(detector: Detector, rig: Rig, frame, lines):
     under its sigma rule). Returns the detections, their trace (the frame's d^2 for the background's
     life), the floor points and covariances."""
     dets, trace = detect(detector, frame, lines)
-    z, R = floor_from_detections(rig, dets.r_f, dets.theta_f, dets.sigma_r_f, dets.sigma_theta_f)
+    z, R = floor_from_detections(rig, dets.r_f, dets.theta_f, dets.sigma_r_f, dets.sigma_theta_f,
+                                 dets.bound_r_f, dets.bound_theta_f)
     return dets, trace, z, R
 
 

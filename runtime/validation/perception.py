@@ -182,7 +182,7 @@ class PerceptionScore:
     miss_causes: Counter = field(default_factory=Counter)
     nees: list = field(default_factory=list)  # (R_m, nees_r, nees_theta)
     #: per matched detection: the true foot's floor radius (m), the errors of r_f (px) and theta_f (rad)
-    #: and the detector's own sigmas (before the rule): what benchmarks/fit_detection_sigmas.py fits
+    #: and the detector's own sigmas and bound parts (before the rule): what benchmarks/fit_detection_sigmas.py fits
     records: list = field(default_factory=list)
 
     def add_frame(self, frame: int, truth: dict, people: list[dict], z: np.ndarray, sigmas: np.ndarray,
@@ -210,7 +210,8 @@ class PerceptionScore:
             self.nees.append((R, (e_r / sigmas[r, 0]) ** 2, (e_t / sigmas[r, 1]) ** 2))
             p = people[r]
             self.records.append((R, float(e_r), e_t, float(p.get("detector_sigma_r_f", sigmas[r, 0])),
-                                 float(p.get("detector_sigma_theta_f", sigmas[r, 1]))))
+                                 float(p.get("detector_sigma_theta_f", sigmas[r, 1])),
+                                 float(p.get("detector_bound_r_f", 0.0)), float(p.get("detector_bound_theta_f", 0.0))))
         out = {"missed": [], "false": []}
         unmatched = [k for k in range(len(people)) if k not in person_of]
         for c, q in enumerate(persons):

@@ -104,6 +104,12 @@ def test_sigma_rule_scales_the_detectors_sigmas_and_adds_the_extra_term(paper_ri
     np.testing.assert_allclose(np.asarray(s_t), np.hypot(2.0 * np.array([0.2, 0.0, 0.004]), 0.003), rtol=1e-12)
     s_r, s_t = detection_sigmas(rig)  # no detection: the rig's defaults as they are
     assert (float(s_r), float(s_t)) == _sigma_defaults(rig)
+    # the bound part (a foot the detector could not see) is added as it is, not scaled by the gain
+    s_r, s_t = detection_sigmas(rig, jnp.array([2.0, 2.0]), jnp.array([0.1, 0.1]), jnp.array([0.0, 5.0]),
+                                jnp.array([0.0, 0.5]))
+    np.testing.assert_allclose(np.asarray(s_r), np.sqrt((1.5 * 2.0) ** 2 + np.array([0.0, 25.0]) + 0.4**2), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(s_t), np.sqrt((2.0 * 0.1) ** 2 + np.array([0.0, 0.25]) + 0.003**2),
+                               rtol=1e-12)
 
 
 def test_the_rig_files_carry_fitted_coefficients(paper_rig):

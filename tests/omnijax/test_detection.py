@@ -300,9 +300,10 @@ def test_build_detector_fisheye(fisheye_rig):
 def test_foot_sigmas_cover_the_failure_modes(paper_detector):
     """The detector's sigmas by sector width (docs/design.md section 4.8): one person's width gives the
     edges' quantisation only; a wider sector (two people, a ghost) half the excess; a narrower one
-    (partly hidden) a uniform spread over the deficit; the radius a share of the person's extent, all of
-    it at the first or last hypothesis (the person reaches past the sampled radii)."""
-    from omnijax.detection._detector import _foot_sigmas
+    (partly hidden) a uniform spread over the deficit; the radius a share of the person's extent. At
+    the first or last hypothesis (the person reaches past the sampled radii) a bound part instead: at
+    the last the whole extent, at the first the blind disc under the camera, radius and azimuth."""
+    from omnijax.detection._detector import BLIND_THETA_SIGMA, _foot_sigmas
     from omnijax.detection._foot import foot_sigma_lookup
 
     polar = paper_detector.polar
@@ -315,11 +316,16 @@ def test_foot_sigmas_cover_the_failure_modes(paper_detector):
     extent = float(polar.hyp_out[i] - i)
     for width, theta_var, share in ((one, 0.0, 0.0), (one + step + 0.1, 0.1**2 / 4, 0.1 / one),
                                     (one - step - 0.05, 0.05**2 / 12, 0.05 / one)):
-        s_r, s_t = _foot_sigmas(paper_detector, jnp.asarray(i), jnp.asarray(contrast), jnp.asarray(width))
+        s_r, s_t, b_r, b_t = _foot_sigmas(paper_detector, jnp.asarray(i), jnp.asarray(contrast), jnp.asarray(width))
         assert float(s_t) == pytest.approx(math.sqrt(step**2 / 24 + theta_var), rel=1e-9)
         assert float(s_r) == pytest.approx(math.sqrt(mc**2 + share * extent**2 / 12), rel=1e-6)
-    for edge in (int(ok[0]), int(ok[-1])):
-        s_r, _ = _foot_sigmas(paper_detector, jnp.asarray(edge), jnp.asarray(contrast),
-                              jnp.asarray(float(polar.hyp_width[edge])))
+        assert float(b_r) == 0.0 and float(b_t) == 0.0
+    for edge, blind in ((int(ok[0]), True), (int(ok[-1]), False)):
+        s_r, _, b_r, b_t = _foot_sigmas(paper_detector, jnp.asarray(edge), jnp.asarray(contrast),
+                                        jnp.asarray(float(polar.hyp_width[edge])))
         m = float(foot_sigma_lookup(paper_detector.foot_sigma, edge, contrast))
-        assert float(s_r) == pytest.approx(math.sqrt(m**2 + float(polar.hyp_out[edge] - edge) ** 2 / 12), rel=1e-6)
+        assert float(s_r) == pytest.approx(m, rel=1e-6)
+        extent = float(polar.hyp_out[edge] - edge)
+        bound = float(polar.hyp_r_f[edge]) / math.sqrt(6) if blind else extent / math.sqrt(12)
+        assert float(b_r) == pytest.approx(bound, rel=1e-6)
+        assert float(b_t) == (BLIND_THETA_SIGMA if blind else 0.0)
