@@ -195,8 +195,7 @@ def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0) -> tuple[A
     deficit = jnp.maximum(one - width - step, 0.0)
     sigma_theta = jnp.sqrt(step**2 / 24 + excess**2 / 4 + deficit**2 / 12)
     extent = (polar.hyp_out[i] - i).astype(jnp.float64)
-    ok = polar.hyp_ok
-    first, last = jnp.argmax(ok), ok.shape[0] - 1 - jnp.argmax(ok[::-1])
+    first, last = polar.hyp_first, polar.hyp_last
     edge = (i <= first) | (i >= last)
     share = jnp.where(edge, 0.0, jnp.minimum((excess + deficit) / one + (1.0 - visible), 1.0))
     sigma_r = jnp.sqrt(foot_sigma_lookup(detector.foot_sigma, i, contrast) ** 2 + share * extent**2 / 12)
@@ -229,7 +228,7 @@ def detections_of(detector: Detector, people: People) -> Detections:
     sigma_r, sigma_theta, bound_r, bound_theta = _foot_sigmas(detector, i, people.contrast, width, people.visible)
     theta_f = wrap_2pi(people.centre * step)
     R = polar.hyp_R[i]
-    first = jnp.argmax(polar.hyp_ok)
+    first = polar.hyp_first
     valid = merge_fragments(people.valid, jnp.stack([R * jnp.cos(theta_f), R * jnp.sin(theta_f)], -1),
                             i == first, polar.hyp_R[first])
     return Detections(

@@ -61,6 +61,16 @@ class PolarIndex(eqx.Module):
     def n_r(self) -> int:
         return self.radii.shape[0]
 
+    @property
+    def hyp_first(self) -> Array:
+        """Index of the first possible foot hypothesis (the innermost: the blind disc's edge)."""
+        return jnp.argmax(self.hyp_ok)
+
+    @property
+    def hyp_last(self) -> Array:
+        """Index of the last possible foot hypothesis (the outermost)."""
+        return self.hyp_ok.shape[0] - 1 - jnp.argmax(self.hyp_ok[::-1])
+
 
 def body_radius(rig: Rig) -> Array:
     """Radius of the person's body cylinder (m): half the shoulder width."""
