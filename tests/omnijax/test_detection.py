@@ -329,3 +329,19 @@ def test_foot_sigmas_cover_the_failure_modes(paper_detector):
         bound = float(polar.hyp_r_f[edge]) / math.sqrt(6) if blind else extent / math.sqrt(12)
         assert float(b_r) == pytest.approx(bound, rel=1e-6)
         assert float(b_t) == (BLIND_THETA_SIGMA if blind else 0.0)
+
+
+def test_prefix_sums_and_argmax_rows_match_numpy():
+    """The feet stage's own prefix sums (a sequential scan) and row argmax (a max and a min) against
+    NumPy's cumsum and argmax, ties and -inf rows included (fixed seed, a 360 x 174 table)."""
+    from omnijax.detection._blobs import argmax_rows, prefix_sums
+
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((360, 174)).astype(np.float32)
+    p = np.asarray(prefix_sums(jnp.asarray(x)))
+    assert p.shape == (361, 174) and np.all(p[0] == 0)
+    np.testing.assert_allclose(p[1:], np.cumsum(x.astype(np.float64), 0), atol=1e-4)
+    y = x.copy()
+    y[3] = -np.inf
+    y[5, [7, 9]] = 10.0  # a tie: the first wins, as np.argmax
+    np.testing.assert_array_equal(np.asarray(argmax_rows(jnp.asarray(y))), np.argmax(y, 1))
