@@ -171,6 +171,7 @@ class Detection(eqx.Module):
     ghost_s: float = eqx.field(static=True, default=0.4)
     ghost_edge: float = eqx.field(static=True, default=6.0)
     absorb_s: float = eqx.field(static=True, default=60.0)
+    off_floor_m: Float[Array, ""] = eqx.field(default=0.5, converter=jnp.asarray)
 
 
 class Room(eqx.Module):
@@ -189,6 +190,25 @@ class Room(eqx.Module):
         for zone in self.exclude:
             inside = inside & ~_in_polygon(zone, X, Y)
         return inside
+
+    def outside_by(self, X, Y) -> Array:
+        """How far (m) floor points (X, Y) lie from where a person can stand: 0 inside the outline and
+        outside every excluded zone, else the distance to the outline (outside it) or to the zone's
+        edge (inside an excluded zone)."""
+        X, Y = jnp.asarray(X), jnp.asarray(Y)
+        d = jnp.where(self.inside_outline(X, Y), 0.0, _edge_distance(self.outline, X, Y))
+        for zone in self.exclude:
+            d = jnp.maximum(d, jnp.where(_in_polygon(zone, X, Y), _edge_distance(zone, X, Y), 0.0))
+        return d
+
+
+def _edge_distance(poly: Float[Array, "n 2"], X, Y) -> Array:
+    """Distance from (X, Y) to the nearest point of the polygon's edges."""
+    X, Y = jnp.asarray(X)[..., None], jnp.asarray(Y)[..., None]
+    x0, y0 = poly[:, 0], poly[:, 1]
+    ex, ey = jnp.roll(x0, -1) - x0, jnp.roll(y0, -1) - y0
+    t = jnp.clip(((X - x0) * ex + (Y - y0) * ey) / jnp.maximum(ex * ex + ey * ey, 1e-12), 0.0, 1.0)
+    return jnp.min(jnp.hypot(X - x0 - t * ex, Y - y0 - t * ey), axis=-1)
 
 
 def _in_polygon(poly: Float[Array, "n 2"], X, Y) -> Array:
@@ -508,6 +528,9 @@ class DetectionSection(Section):
                           "learnt as background, s")
     foot_mc_profiles: Annotated[int, Field(ge=16, le=4096)] = Field(
         256, description="Monte Carlo profiles per table cell of sigma_r_f")
+    off_floor_m: Annotated[float, within(0.0, 100.0, "metres", why="larger than any room")] = Field(
+        0.5, description="a detection whose foot lies farther than this outside the room's floor (beyond "
+                         "the outline, or inside an excluded zone) is no person and is dropped, m")
 
 
 class ZoomSection(Section):
@@ -796,6 +819,7 @@ def parse_rig(
         sigma_extra_theta_f=_a(math.radians(de.sigma_extra_theta_f_deg)),
         background_seconds=de.background_seconds, still_s=de.still_s, ghost_s=de.ghost_s,
         ghost_edge=de.ghost_edge, absorb_s=de.absorb_s,
+        off_floor_m=_a(de.off_floor_m),
     )
     room = Room(outline=_a(f.room.outline), exclude=tuple(_a(p) for p in f.room.exclude))
     return Rig(

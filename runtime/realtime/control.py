@@ -39,10 +39,14 @@ def perceive(detector: Detector, rig: Rig, frame, lines):
     """Detection (steps 1-6) against the background's polar samples ``lines`` and the detections'
     floor positions with covariances (the aim pipeline's :func:`~omnijax.aiming.floor_from_detections`,
     under its sigma rule). Returns the detections, their trace (the frame's d^2 for the background's
-    life), the floor points and covariances."""
+    life), the floor points and covariances. A detection whose foot lies more than ``[detection]
+    off_floor_m`` outside the room's floor (beyond the outline or inside an excluded zone: a change on
+    a wall or on furniture) is no person and is marked invalid."""
     dets, trace = detect(detector, frame, lines)
     z, R = floor_from_detections(rig, dets.r_f, dets.theta_f, dets.sigma_r_f, dets.sigma_theta_f,
                                  dets.bound_r_f, dets.bound_theta_f)
+    on_floor = rig.room.outside_by(z[:, 0], z[:, 1]) <= rig.detection.off_floor_m
+    dets = eqx.tree_at(lambda d: d.valid, dets, dets.valid & on_floor)
     return dets, trace, z, R
 
 

@@ -91,3 +91,22 @@ def test_control_step_is_the_tracker_and_the_aim_pipeline_fused(paper_detector, 
     got = jax.tree.map(lambda a: a[0, 0], c.aims)  # the rig's one PTZ, the first confirmed track
     for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(want)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-12)
+
+
+def test_perceive_drops_a_detection_whose_foot_is_off_the_floor(paper_detector, paper_rig, scene):
+    """The painted person's foot, with the room's outline moved 2 m away from it: no person there
+    (a change on a wall); with ``off_floor_m`` beyond that distance it is kept."""
+    import equinox as eqx
+
+    _, lines, frame, _ = scene
+    dets, _, z, _ = perceive(paper_detector, paper_rig, frame, lines)
+    zk = np.asarray(z[int(np.argmax(np.asarray(dets.valid)))])
+    away = zk + 2.0 * zk / np.linalg.norm(zk) + np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+    rig = eqx.tree_at(lambda r: (r.room.outline, r.room.exclude), paper_rig, (jnp.asarray(away), ()))
+    far = float(rig.room.outside_by(zk[0], zk[1]))
+    assert 1.4 < far < 2.6
+    dropped, _, _, _ = perceive(paper_detector, rig, frame, lines)
+    assert not np.asarray(dropped.valid).any()
+    lenient = eqx.tree_at(lambda r: r.detection.off_floor_m, rig, jnp.asarray(far + 0.1))
+    kept, _, _, _ = perceive(paper_detector, lenient, frame, lines)
+    np.testing.assert_array_equal(np.asarray(kept.valid), np.asarray(dets.valid))
