@@ -57,6 +57,7 @@ from ._life import (
     learned_share as learned_share,
     live_step as live_step,
     regions as regions,
+    settle_learning as settle_learning,
     start_life as start_life,
 )
 from ._polar import (

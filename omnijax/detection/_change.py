@@ -25,11 +25,19 @@ from ._chroma import chromaticity_planes
 
 
 class Background(eqx.Module):
-    """Per-pixel background colour, the variance factor of its estimate, and the sensor noise (grey levels)."""
+    """Per-pixel background colour, the variance factor of its estimate, and the sensor noise (grey levels).
+
+    A learnt background also keeps its learning's *minority* (:func:`learn_background`): per pixel,
+    the mean colour of the samples that disagreed with the median but agree among themselves (their
+    own median's), and how many they were; the background's life settles from it whether the
+    majority was the floor or someone who stood there (:func:`omnijax.detection.settle_learning`).
+    """
 
     mean: Float[Array, "H W 3"]
     var_factor: Float[Array, "H W"]
     sigma: Float[Array, "H W"]
+    minority: Float[Array, "H W 3"] | None = None
+    minority_n: Float[Array, "H W"] | None = None
 
 
 @functools.partial(jax.jit, static_argnames="pool")
@@ -89,7 +97,15 @@ def learn_background(frames: UInt8[ArrayLike, "N H W 3"], sigma=None, floor=0.5)
     n = jnp.maximum(keep.sum(0), 1)
     mean = jnp.where(keep, f, 0.0).sum(0) / n
     mean = jnp.where(keep.any(0), mean, med)
-    return Background(mean=mean, var_factor=1.0 / n[..., 0].astype(jnp.float32), sigma=sigma)
+    # the minority: the unclipped samples left out, around their own median colour
+    other = ~keep[..., 0] & unclipped
+    med2 = _temporal_median(jnp.where(other[..., None], jnp.asarray(frames), jnp.zeros((), frames.dtype)),
+                            other.sum(0))
+    keep2 = (change_measure(f, jnp.broadcast_to(med2, f.shape), 1.0, sigma) <= AGREE) & other
+    n2 = keep2.sum(0)
+    minority = jnp.where(keep2[..., None], f, 0.0).sum(0) / jnp.maximum(n2, 1)[..., None]
+    return Background(mean=mean, var_factor=1.0 / n[..., 0].astype(jnp.float32), sigma=sigma,
+                      minority=jnp.where(n2[..., None] > 0, minority, mean), minority_n=n2.astype(jnp.float32))
 
 
 def learned(var_factor: Float[ArrayLike, "*b"], frames: float | ArrayLike,
@@ -101,12 +117,21 @@ def learned(var_factor: Float[ArrayLike, "*b"], frames: float | ArrayLike,
     return 1.0 / jnp.asarray(var_factor) >= share * frames - 1e-3
 
 
-def _temporal_median(frames: Shaped[Array, "N H W 3"]) -> Float[Array, "H W 3"]:
+def _temporal_median(frames: Shaped[Array, "N H W 3"], count=None) -> Float[Array, "H W 3"]:
     """Per-pixel median over the frames: sorted in their own (8-bit) type along the minor
-    axis, which XLA's CPU sort does several times faster than a float median over axis 0."""
+    axis, which XLA's CPU sort does several times faster than a float median over axis 0.
+
+    ``count`` (H W): the median of the last ``count`` of each pixel's samples once sorted, for frames
+    whose other samples were set to 0 (any 0 among the counted ones ties with them, so the order
+    statistics are unchanged)."""
     n = frames.shape[0]
     srt = jnp.sort(jnp.moveaxis(frames, 0, -1), axis=-1).astype(jnp.float32)
-    return 0.5 * (srt[..., (n - 1) // 2] + srt[..., n // 2])
+    if count is None:
+        return 0.5 * (srt[..., (n - 1) // 2] + srt[..., n // 2])
+    c = jnp.asarray(count, jnp.int32)[..., None, None]
+    lo = jnp.clip(n - c + (c - 1) // 2, 0, n - 1)
+    hi = jnp.clip(n - c + c // 2, 0, n - 1)
+    return 0.5 * (jnp.take_along_axis(srt, lo, -1)[..., 0] + jnp.take_along_axis(srt, hi, -1)[..., 0])
 
 
 class ReferenceTerms(eqx.Module):

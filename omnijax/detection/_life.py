@@ -45,8 +45,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, UInt8
 
-from ._change import AGREE, change_measure, learned
-from ._detector import Detections, Detector, LineBackground, lines_from
+from ._change import AGREE, Background, change_against, change_measure, learned
+from ._detector import Detections, Detector, LineBackground, find_sectors, lines_from, locate_people
 from ._indexing import gather_rgb
 
 #: d^2 of a changed sample: the chi-square(2) 1 - 1e-3 quantile (a background sample exceeds it once
@@ -209,6 +209,41 @@ def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets
     new = Life(lines=lines_from(mean, var_factor, lines.sigma), seen=seen, prev=cur,
                still=jnp.where(fix, 0.0, still), ghost=jnp.where(fix, 0.0, ghost))
     return new, ev, ghostly
+
+
+#: Fewest learning frames a minority colour must hold to be taken for the floor (a tenth of 30).
+MINORITY_FRAMES = 3.0
+
+
+@jax.jit
+def settle_learning(detector: Detector, lines: LineBackground, bg: Background, edge) -> tuple[LineBackground, Array]:
+    """The learning's majority settled where it was someone who stood there (before :func:`start_life`).
+
+    Learning keeps, per sample, the colour most of its frames showed (:func:`~omnijax.learn_background`),
+    so someone who stood on a spot through most of the window is learnt as the floor and stays
+    invisible for as long as they stand. The frames they were not there in are the sample's
+    *minority* (``bg.minority``: its mean colour, ``bg.minority_n``: how many frames; ``lines`` is
+    ``bg`` at the polar samples, :func:`~omnijax.detection.line_background`).
+    The minority image (the minority where it holds :data:`MINORITY_FRAMES`, the majority elsewhere) is
+    searched for people against the majority, and each one found is judged by the ghost evidence
+    (:func:`ghost_evidence`) with the minority as "now" and the majority as "before": where the
+    minority shows the floor continuing the floor around it (no edge, under ``edge``) and the majority
+    an edge :data:`GHOST_RATIO` times stronger (a person against the floor), the majority was the
+    person and the region's changed samples take their minority (variance factor ``1 / minority_n``:
+    the life keeps learning them as they are seen free). A minority of people passing (an edge in it)
+    is left out. Returns the settled lines and the samples that took their minority."""
+    ok, idx = detector.polar.line_ok, detector.polar.line_index
+    minority, minority_n = gather_rgb(bg.minority, idx), bg.minority_n.reshape(-1)[idx]
+    has = (minority_n >= MINORITY_FRAMES) & ok
+    composite = jnp.where(has[..., None], minority, lines.mean)
+    d2 = jnp.where(ok, change_against(composite, lines.ref, lines.sigma), 0.0)
+    dets = locate_people(detector, d2, find_sectors(detector, d2.sum(-1)))
+    ev = ghost_evidence(detector, composite, lines, d2, dets)
+    floor = dets.valid & (ev.edge_now < edge) & (ev.edge_before > GHOST_RATIO * ev.edge_now)
+    take = regions(dets, floor, d2.shape) & has & (d2 > CHANGED)
+    mean = jnp.where(take[..., None], minority, lines.mean)
+    var_factor = jnp.where(take, 1.0 / jnp.maximum(minority_n, 1.0), lines.var_factor)
+    return lines_from(mean, var_factor, lines.sigma), take
 
 
 def learned_share(detector: Detector, life: Life, frames: float) -> Array:

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from omnijax import Rig, build_detector, detection_sigmas, learn_background, line_background
-from omnijax.detection import LifeRates, learned_share, live_step, start_life
+from omnijax.detection import LifeRates, learned_share, live_step, settle_learning, start_life
 from runtime.errors import UsageError
 from runtime.realtime.control import perceive
 from runtime.realtime.targeting import TrustRule, is_trusted
@@ -100,7 +100,14 @@ class BackgroundKeeper:
     def __init__(self, rig: Rig, detector, bg, trust: TrustRule, fps: float | None, learning_frames: int,
                  every: int = 1):
         self.rig, self.detector, self.trust = rig, detector, trust
-        self.life = start_life(line_background(detector, bg))
+        lines = line_background(detector, bg)
+        #: share of the floor's samples whose learnt colour was someone who stood there, settled to the
+        #: learning's minority (:func:`omnijax.detection.settle_learning`)
+        self.settled_share = 0.0
+        if bg.minority is not None:
+            lines, took = settle_learning(detector, lines, bg, jnp.asarray(float(rig.detection.ghost_edge)))
+            self.settled_share = float(jnp.sum(took) / jnp.maximum(jnp.sum(detector.polar.line_ok), 1))
+        self.life = start_life(lines)
         self.rates = life_rates(rig, fps, learning_frames, every)
         self.learning_frames = learning_frames
         self.counts = LifeCounts()
@@ -149,7 +156,8 @@ class BackgroundKeeper:
 
     def summary(self) -> dict:
         self._collect()
-        return {**self.counts.as_dict(), "learned_share_start": self.learned_at_start,
+        return {**self.counts.as_dict(), "settled_share": self.settled_share,
+                "learned_share_start": self.learned_at_start,
                 "learned_share_end": self.learned_share()}
 
 

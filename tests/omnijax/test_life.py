@@ -166,3 +166,42 @@ def test_what_learning_could_not_settle_is_learnt_when_free(paper_detector):
     moved = step[ok] / np.maximum(gap[ok], 1e-6)
     fast, slow = moved[few[ok] & (gap[ok] > 1)], moved[~few[ok] & (gap[ok] > 1)]
     assert np.median(fast) == pytest.approx(1 / 3, rel=0.05) and np.median(slow) == pytest.approx(0.01, rel=0.1)
+
+
+def test_the_learning_keeps_its_minority(room):
+    """Someone stood through 18 of 30 learning frames, the floor showed in the first 12: the background
+    holds the person, its minority the floor (12 frames)."""
+    rng, base, person, _ = room
+    frames = np.stack([_noisy(rng, base if k < 12 else person) for k in range(30)])
+    bg = learn_background(frames)
+    where = np.any(person != base, -1)
+    np.testing.assert_allclose(np.asarray(bg.mean)[where], person[where], atol=1.0)
+    np.testing.assert_allclose(np.asarray(bg.minority)[where], base[where], atol=1.5)
+    assert (np.asarray(bg.minority_n)[where] >= 11).mean() > 0.99
+    assert (np.asarray(bg.minority_n)[~where] <= 1).mean() > 0.99  # elsewhere a stray noisy sample at most
+
+
+@pytest.mark.parametrize("stood", [18, 10])
+def test_settling_the_learning_finds_who_stood_through_it(paper_detector, room, stood):
+    """Learning where someone stood through the last ``stood`` of 30 frames. Through 18 (the majority):
+    learnt as the floor, so the person standing on is invisible, until the learning is settled from its
+    minority (the floor continues the floor, the majority has a person's edge); then they are detected.
+    Through 10 (a minority: a person passing): nothing is taken, and the empty floor stays empty."""
+    from omnijax.detection import settle_learning
+
+    rng, base, person, i = room
+    bg = learn_background(np.stack([_noisy(rng, base if k < 30 - stood else person) for k in range(30)]))
+    lines = line_background(paper_detector, bg)
+    settled, took = settle_learning(paper_detector, lines, bg, jnp.asarray(6.0))
+    now = jnp.asarray(_noisy(rng, person if stood > 15 else base))
+    before, _ = detect(paper_detector, now, lines)
+    after, _ = detect(paper_detector, now, settled)
+    if stood > 15:
+        assert not np.asarray(before.valid).any()
+        assert int(np.asarray(after.valid).sum()) == 1
+        k = int(np.argmax(np.asarray(after.valid)))
+        assert abs(int(np.argmin(np.abs(np.asarray(paper_detector.polar.hyp_r_f) - float(after.r_f[k])))) - i) <= 2
+        assert int(np.asarray(took).sum()) > 500
+    else:
+        assert int(np.asarray(took).sum()) == 0
+        assert not np.asarray(after.valid).any()
