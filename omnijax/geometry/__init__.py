@@ -24,5 +24,6 @@ from ._pointing import (
     image_to_floor as image_to_floor,
     point_image_radius as point_image_radius,
     pointing as pointing,
+    pointing_from_floor as pointing_from_floor,
     world_to_image as world_to_image,
 )

@@ -118,8 +118,17 @@ def pointing(x: Float[Array, "*b 9"], profile: RadialProfile) -> Pointing:
     """
     r_f, theta_f, H_o, H_f, D_c, theta_c, r_m, H_p, R_h = jnp.moveaxis(x, -1, 0)
     R_p, ok_floor = floor_radius(r_f, r_m, H_o, profile)
-    N_s, M_s, D_p, near = foveal_offsets(R_p, theta_f - theta_c, D_c)
-    aim = H_p - R_h - H_f
+    p = pointing_from_floor(R_p, theta_f - theta_c, D_c, H_p - R_h - H_f)
+    return eqx.tree_at(lambda p: p.valid, p, p.valid & ok_floor)
+
+
+def pointing_from_floor(R_p, vartheta, D_c, aim) -> Pointing:
+    """Eqs 3-4 from the person's floor radius ``R_p`` (m), the azimuth ``vartheta = theta_f - theta_c``
+    between the person and the PTZ seen from the omni axis, ``D_c`` and the head's height over the
+    PTZ ``aim = H_p - R_h - H_f`` (m): the second half of :func:`pointing`, whose inputs each feed
+    exactly one of these four (so the first-order covariance factors through them:
+    :mod:`omnijax.uncertainty`). ``valid`` is False with the person at the PTZ's foot."""
+    N_s, M_s, D_p, near = foveal_offsets(R_p, vartheta, D_c)
     return Pointing(
         pan=jnp.arctan2(N_s, M_s),
         tilt=jnp.arctan2(aim, D_p),
@@ -128,7 +137,7 @@ def pointing(x: Float[Array, "*b 9"], profile: RadialProfile) -> Pointing:
         slant=jnp.hypot(D_p, aim),
         sin_pan=N_s / D_p,
         tan_tilt=aim / D_p,
-        valid=ok_floor & ~near,
+        valid=~near,
     )
 
 

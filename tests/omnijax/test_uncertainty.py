@@ -142,6 +142,19 @@ def test_autodiff_covariance_over_many_points_is_J_sigma_JT():
     assert err.max() < CLOSED_FORM
 
 
+def test_autodiff_by_halves_is_jacfwd_of_the_whole_pointing():
+    """The autodiff method differentiates pointing's two halves (eq 1, then eqs 3-4); over 500 random
+    points it equals J Sigma J^T with J = jacfwd of the whole nine-input function."""
+    rng = np.random.default_rng(8)
+    x = random_inputs(rng, 500)
+    s = np.abs(x) * rng.uniform(1e-3, 2e-2, x.shape) + 1e-3
+    cov = np.asarray(pointing_covariance(jnp.asarray(x), jnp.asarray(s), PROFILE, "autodiff").cov)
+    J = np.asarray(jax.vmap(jax.jacfwd(pointing_outputs), in_axes=(0, None))(jnp.asarray(x), PROFILE))
+    ref = np.einsum("pai,pi,pbi->pab", J, s**2, J)
+    scale = np.sqrt(np.einsum("paa->pa", ref))
+    assert (np.abs(cov - ref) / (scale[:, :, None] * scale[:, None, :])).max() < 1e-9
+
+
 @settings(max_examples=300)
 @given(x=inputs)
 def test_covariances_are_symmetric_positive_semidefinite(x):
