@@ -20,8 +20,21 @@ lighting unchanged), learns the background, then times after compilation:
                same process (the peer), after it learnt the same background frames;
   compiles     XLA compilations during the timed frames (0 is the only right answer).
 
+Then, at the scenario's own frame size (640x480 for the built-in scenarios), the
+whole control path of the real-time loop, frame by frame as its control thread
+runs it (the one compiled call: detection, floor positions, tracker, aims; the
+tracker's bookkeeping, the target choice, the dead-zone test, the command handed
+to the PTZ link, the background's life; no drawing, video or log):
+
+  cameras_per_core   the frame period (1 / the scenario's fps) over the mean wall
+                     time per frame on the pinned core: how many such cameras one
+                     core keeps up with; "control" holds the details (per-frame
+                     wall and CPU ms mean/p50/p90/p99, the same by the p90, the
+                     stages' medians). --no-control skips it.
+
 The process is pinned to one core (and XLA to one thread) before JAX loads.
---json prints one JSON object keyed by frame size, e.g. "640x480".
+--json prints one JSON object keyed by frame size, e.g. "640x480", plus
+"cores", "scenario", "cameras_per_core" and "control".
 """
 
 DEFAULT_SIZES = ("640x480", "1920x1920")
@@ -38,6 +51,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", type=int, default=200, metavar="N",
                    help="timed calls per measurement, cycling over the rendered frames (default: 200)")
     p.add_argument("--core", type=int, default=0, metavar="K", help="CPU core to pin to (default: 0)")
+    p.add_argument("--no-control", action="store_true",
+                   help="skip the control path's cameras_per_core (the detector only)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.set_defaults(func=run)
 
@@ -75,6 +90,11 @@ def run(args: argparse.Namespace) -> int:
     report = {"cores": 1, "scenario": scenario}
     for w, h in sizes:
         report[f"{w}x{h}"] = bench_size(scenario, (w, h), args.frames, progress=not args.json)
+    if not args.no_control:
+        from runtime.bench.control import bench_control
+
+        report["control"] = bench_control(scenario, args.frames, progress=not args.json)
+        report["cameras_per_core"] = report["control"]["cameras_per_core"]["mean"]
     if args.json:
         print(json.dumps(report, indent=2))
     else:
@@ -92,3 +112,9 @@ def _print_table(report: dict, sizes) -> None:
                          f"{m['p50']:.3f}", f"{r['mog2_over_detect']:.1f}x", r["compiles"]))
         stages = ", ".join(f"{k} {v['p50']:.3f}" for k, v in r["stages_ms"].items())
         print(f"{'':<11} stages p50 ms: {stages}; {r['people']:.1f} people per frame on average")
+    if "control" in report:
+        c = report["control"]
+        f, u = c["frame_ms"], c["cpu_ms"]
+        print(f"control path at {c['size']} ({c['frames']} frames): per frame p50 {f['p50']:.2f} ms, p90 {f['p90']:.2f}, "
+              f"mean {f['mean']:.2f} (CPU mean {u['mean']:.2f}): cameras_per_core {report['cameras_per_core']:.1f} "
+              f"at {c['fps']:g} fps ({c['cameras_per_core']['p90']:.1f} by the p90)")

@@ -94,3 +94,26 @@ def test_help_lists_render(capsys):
         build_parser().parse_args(["render", "--help"])
     out = capsys.readouterr().out
     assert "truth.jsonl" in out and "--png-every" in out
+
+
+@pytest.mark.slow
+def test_bench_reports_the_detector_and_the_cameras_one_core_serves(tmp_path):
+    """``omnijax bench --json`` in its own process (it pins itself to one core before JAX loads): the
+    detector's figures per size with no compilation while timed, and the control path's
+    ``cameras_per_core`` (the frame period over the mean time per frame) with its details."""
+    import subprocess
+    import sys
+
+    from tests.paths import ROOT
+
+    run = subprocess.run([sys.executable, "-m", "runtime.cli", "bench", "--sizes", "160x120", "--frames", "10",
+                          "--json"], cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr[-2000:]
+    report = json.loads(run.stdout)
+    small = report["160x120"]
+    assert small["compiles"] == 0 and small["detect_ms"]["p50"] > 0 and small["mog2_ms"]["p50"] > 0
+    control = report["control"]
+    assert control["size"] == "640x480" and control["frames"] == 10
+    f = control["frame_ms"]
+    assert 0 < f["p50"] <= f["p90"] <= f["max"]
+    assert report["cameras_per_core"] == pytest.approx(1e3 / control["fps"] / f["mean"])
