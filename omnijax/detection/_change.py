@@ -81,6 +81,10 @@ def learn_background(frames: UInt8[ArrayLike, "N H W 3"], sigma=None, floor=0.5)
     (a channel at 0 or 255: a white shirt under a lamp) agrees with any colour, since d^2 holds no
     evidence there; it is kept out of the mean unless every frame of the pixel was clipped.
 
+    The samples left out are kept as the *minority*: the mean of those that agree with their own
+    median colour, and their count (``minority``, ``minority_n``; the mean where there are none), for
+    :func:`omnijax.detection.settle_learning`.
+
     ``sigma`` (grey levels, scalar or per pixel) defaults to :func:`estimate_sensor_noise` of
     the frames with the given ``floor``.
     """

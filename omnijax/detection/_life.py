@@ -2,7 +2,9 @@
 absorption, on the polar samples the detector reads (docs/design.md section 4, "The background's
 life"; docs/detection.md, "The background's life").
 
-The paper learns a background once; a system that runs for hours must keep it right. One jitted
+The paper learns a background once; a system that runs for hours must keep it right. Once, before
+the first frame, :func:`settle_learning` takes the learning's minority where the majority was someone
+who stood through most of it (the floor they hid continues the floor around it). Then one jitted
 call per frame (:func:`live_step`), after detection, with the frame's d^2 (the detector's trace):
 
 1. **Ghost evidence** of each detection (:func:`ghost_evidence`): is there an object's edge in the

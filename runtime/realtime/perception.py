@@ -6,7 +6,10 @@ background's life, as ``omnijax detect``, ``run``, ``demo`` and the perception s
   frames spread over ``background_seconds`` (every ``step``-th frame), robustly averaged around their
   median colour (:func:`omnijax.learn_background`): a person standing through less than half of
   the window is not learnt, and what the window could not settle is learnt later, as it is seen
-  free (:mod:`omnijax.detection._life`). The frames after the window are processed.
+  free (:mod:`omnijax.detection._life`). Someone who stood through more than half of it is learnt,
+  then settled from the learning's minority when the keeper starts
+  (:func:`omnijax.detection.settle_learning`: the floor they hid continues the floor around it). The
+  frames after the window are processed.
 - **The background's life** (:class:`BackgroundKeeper`): after each frame's detection, the kernel
   :func:`omnijax.detection.live_step` repairs ghosts (detections with no object edge in the current
   image), absorbs what stays changed and still for ``absorb_s`` outside every trusted person, lets
