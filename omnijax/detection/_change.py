@@ -27,17 +27,17 @@ from ._chroma import chromaticity_planes
 class Background(eqx.Module):
     """Per-pixel background colour, the variance factor of its estimate, and the sensor noise (grey levels).
 
-    A learnt background also keeps its learning's *minority* (:func:`learn_background`): per pixel,
-    the mean colour of the samples that disagreed with the median but agree among themselves (their
-    own median's), and how many they were; the background's life settles from it whether the
-    majority was the floor or someone who stood there (:func:`omnijax.detection.settle_learning`).
+    A learnt background also keeps its learning's *minorities* (:func:`learn_background`): per pixel,
+    the mean colours of the samples that disagreed with the median but agree with a candidate colour,
+    and how many they were; the background's life settles from them whether the majority was the
+    floor or someone who stood there (:func:`omnijax.detection.settle_learning`).
     """
 
     mean: Float[Array, "H W 3"]
     var_factor: Float[Array, "H W"]
     sigma: Float[Array, "H W"]
-    minority: Float[Array, "H W 3"] | None = None
-    minority_n: Float[Array, "H W"] | None = None
+    minority: Float[Array, "M H W 3"] | None = None
+    minority_n: Float[Array, "M H W"] | None = None
 
 
 @functools.partial(jax.jit, static_argnames="pool")
@@ -81,9 +81,12 @@ def learn_background(frames: UInt8[ArrayLike, "N H W 3"], sigma=None, floor=0.5)
     (a channel at 0 or 255: a white shirt under a lamp) agrees with any colour, since d^2 holds no
     evidence there; it is kept out of the mean unless every frame of the pixel was clipped.
 
-    The samples left out are kept as the *minority*: the mean of those that agree with their own
-    median colour, and their count (``minority``, ``minority_n``; the mean where there are none), for
-    :func:`omnijax.detection.settle_learning`.
+    The samples left out are kept as three *minorities* (``minority`` (3 H W 3), ``minority_n`` (3 H
+    W)), for :func:`omnijax.detection.settle_learning`: the mean of those that agree with a candidate
+    colour, and their count (the mean where there are none), for three candidates: their own median,
+    and the medians of the window's first and last thirds (someone who slowed down onto the spot and
+    stayed leaves no colour with a majority, but the first frames show the floor; someone who stood
+    there through most of the window and left, the last ones).
 
     ``sigma`` (grey levels, scalar or per pixel) defaults to :func:`estimate_sensor_noise` of
     the frames with the given ``floor``.
@@ -101,13 +104,18 @@ def learn_background(frames: UInt8[ArrayLike, "N H W 3"], sigma=None, floor=0.5)
     n = jnp.maximum(keep.sum(0), 1)
     mean = jnp.where(keep, f, 0.0).sum(0) / n
     mean = jnp.where(keep.any(0), mean, med)
-    # the minority: the unclipped samples left out, around their own median colour
+    # the minorities: the unclipped samples left out, around each of three candidate colours: their own
+    # median, and the medians of the window's first and last thirds (someone who slowed down onto the
+    # spot leaves no majority at all, but the first frames show the floor; someone who stood there
+    # and left, the last frames)
     other = ~keep[..., 0] & unclipped
-    med2 = _temporal_median(jnp.where(other[..., None], jnp.asarray(frames), jnp.zeros((), frames.dtype)),
-                            other.sum(0))
-    keep2 = (change_measure(f, jnp.broadcast_to(med2, f.shape), 1.0, sigma) <= AGREE) & other
-    n2 = keep2.sum(0)
-    minority = jnp.where(keep2[..., None], f, 0.0).sum(0) / jnp.maximum(n2, 1)[..., None]
+    raw = jnp.asarray(frames)
+    third = max(raw.shape[0] // 3, 1)
+    candidates = (_temporal_median(jnp.where(other[..., None], raw, jnp.zeros((), raw.dtype)), other.sum(0)),
+                  _temporal_median(raw[:third]), _temporal_median(raw[-third:]))
+    agree = [(change_measure(f, jnp.broadcast_to(c, f.shape), 1.0, sigma) <= AGREE) & other for c in candidates]
+    n2 = jnp.stack([a.sum(0) for a in agree])
+    minority = jnp.stack([jnp.where(a[..., None], f, 0.0).sum(0) for a in agree]) / jnp.maximum(n2, 1)[..., None]
     return Background(mean=mean, var_factor=1.0 / n[..., 0].astype(jnp.float32), sigma=sigma,
                       minority=jnp.where(n2[..., None] > 0, minority, mean), minority_n=n2.astype(jnp.float32))
 

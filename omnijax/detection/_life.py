@@ -223,9 +223,10 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
 
     Learning keeps, per sample, the colour most of its frames showed (:func:`~omnijax.learn_background`),
     so someone who stood on a spot through most of the window is learnt as the floor and stays
-    invisible for as long as they stand. The frames they were not there in are the sample's
-    *minority* (``bg.minority``: its mean colour, ``bg.minority_n``: how many frames; ``lines`` is
-    ``bg`` at the polar samples, :func:`~omnijax.detection.line_background`).
+    invisible for as long as they stand. The frames they were not there in are one of the sample's
+    *minorities* (``bg.minority``: their mean colours, ``bg.minority_n``: how many frames each;
+    ``lines`` is ``bg`` at the polar samples, :func:`~omnijax.detection.line_background`), each
+    tried in turn as below.
     The minority image (the minority where it holds :data:`MINORITY_FRAMES`, the majority elsewhere) is
     searched for people against the majority, and each one found is judged by the ghost evidence
     (:func:`ghost_evidence`) with the minority as "now" and the majority as "before": where the
@@ -235,17 +236,20 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
     the life keeps learning them as they are seen free). A minority of people passing (an edge in it)
     is left out. Returns the settled lines and the samples that took their minority."""
     ok, idx = detector.polar.line_ok, detector.polar.line_index
-    minority, minority_n = gather_rgb(bg.minority, idx), bg.minority_n.reshape(-1)[idx]
-    has = (minority_n >= MINORITY_FRAMES) & ok
-    composite = jnp.where(has[..., None], minority, lines.mean)
-    d2 = jnp.where(ok, change_against(composite, lines.ref, lines.sigma), 0.0)
-    dets = locate_people(detector, d2, find_sectors(detector, d2.sum(-1)))
-    ev = ghost_evidence(detector, composite, lines, d2, dets)
-    floor = dets.valid & (ev.edge_now < edge) & (ev.edge_before > GHOST_RATIO * ev.edge_now)
-    take = regions(dets, floor, d2.shape) & has & (d2 > CHANGED)
-    mean = jnp.where(take[..., None], minority, lines.mean)
-    var_factor = jnp.where(take, 1.0 / jnp.maximum(minority_n, 1.0), lines.var_factor)
-    return lines_from(mean, var_factor, lines.sigma), take
+    took = jnp.zeros(ok.shape, bool)
+    for j in range(bg.minority.shape[0]):  # each candidate in turn, against the lines settled so far
+        minority, minority_n = gather_rgb(bg.minority[j], idx), bg.minority_n[j].reshape(-1)[idx]
+        has = (minority_n >= MINORITY_FRAMES) & ok & ~took
+        composite = jnp.where(has[..., None], minority, lines.mean)
+        d2 = jnp.where(ok, change_against(composite, lines.ref, lines.sigma), 0.0)
+        dets = locate_people(detector, d2, find_sectors(detector, d2.sum(-1)))
+        ev = ghost_evidence(detector, composite, lines, d2, dets)
+        floor = dets.valid & (ev.edge_now < edge) & (ev.edge_before > GHOST_RATIO * ev.edge_now)
+        take = regions(dets, floor, d2.shape) & has & (d2 > CHANGED)
+        mean = jnp.where(take[..., None], minority, lines.mean)
+        var_factor = jnp.where(take, 1.0 / jnp.maximum(minority_n, 1.0), lines.var_factor)
+        lines, took = lines_from(mean, var_factor, lines.sigma), took | take
+    return lines, took
 
 
 def learned_share(detector: Detector, life: Life, frames: float) -> Array:

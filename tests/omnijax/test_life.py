@@ -171,14 +171,18 @@ def test_what_learning_could_not_settle_is_learnt_when_free(paper_detector):
 def test_the_learning_keeps_its_minority(room):
     """Someone stood through 18 of 30 learning frames, the floor showed in the first 12: the background
     holds the person, its minority the floor (12 frames)."""
-    rng, base, person, _ = room
+    _, base, person, _ = room
+    rng = np.random.default_rng(31)  # its own draws: the result does not hang on the tests run before
     frames = np.stack([_noisy(rng, base if k < 12 else person) for k in range(30)])
     bg = learn_background(frames)
     where = np.any(person != base, -1)
-    np.testing.assert_allclose(np.asarray(bg.mean)[where], person[where], atol=1.0)
-    np.testing.assert_allclose(np.asarray(bg.minority)[where], base[where], atol=1.5)
-    assert (np.asarray(bg.minority_n)[where] >= 11).mean() > 0.99
-    assert (np.asarray(bg.minority_n)[~where] <= 1).mean() > 0.99  # elsewhere a stray noisy sample at most
+    # means of 18 and 12 samples of sigma 1 (and the quantiser): 1.5 and 2 grey levels are over 6 sigma
+    np.testing.assert_allclose(np.asarray(bg.mean)[where], person[where], atol=1.5)
+    for j in (0, 1):  # the others' median, and the first third's (the last third's is the person)
+        np.testing.assert_allclose(np.asarray(bg.minority[j])[where], base[where], atol=2.0)
+        assert (np.asarray(bg.minority_n[j])[where] >= 11).mean() > 0.99
+    assert (np.asarray(bg.minority_n[2])[where] <= 1).mean() > 0.99
+    assert (np.asarray(bg.minority_n)[:, ~where] <= 1).mean() > 0.99  # elsewhere a stray noisy sample at most
 
 
 @pytest.mark.parametrize("stood", [18, 10])
