@@ -115,6 +115,7 @@ def _print_table(report: dict, sizes) -> None:
     if "control" in report:
         c = report["control"]
         f, u = c["frame_ms"], c["cpu_ms"]
-        print(f"control path at {c['size']} ({c['frames']} frames): per frame p50 {f['p50']:.2f} ms, p90 {f['p90']:.2f}, "
-              f"mean {f['mean']:.2f} (CPU mean {u['mean']:.2f}): cameras_per_core {report['cameras_per_core']:.1f} "
+        print(f"control path at {c['size']} ({c['frames']} frames): per frame p50 {f['p50']:.2f} ms, "
+              f"p90 {f['p90']:.2f}, mean {f['mean']:.2f} (CPU mean {u['mean']:.2f}): "
+              f"cameras_per_core {report['cameras_per_core']:.1f} "
               f"at {c['fps']:g} fps ({c['cameras_per_core']['p90']:.1f} by the p90)")
