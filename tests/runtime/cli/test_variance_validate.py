@@ -129,7 +129,7 @@ def test_validate_quick_writes_report_and_maps(tmp_path):
 
 def test_validate_failure_leaves_nothing_behind(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
-    bad.write_text((CONFIGS / "paper.toml").read_text().replace("[room]", "[room]\nfloor = 1"))
+    bad.write_text((CONFIGS / "paper.toml").read_text().replace("\n[room]\n", "\n[room]\nfloor = 1\n"))
     out = tmp_path / "val"
     assert main(["validate", "--config", str(bad), "--out", str(out), "--quick"]) == 2
     assert not out.exists() and not list(tmp_path.glob(".*partial*"))
