@@ -26,7 +26,6 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -108,16 +107,10 @@ class BackgroundKeeper:
         #: share of the floor's samples whose learnt colour was someone who stood there, settled to the
         #: learning's minority (:func:`omnijax.detection.settle_learning`)
         self.settled_share = 0.0
-        took = None
         if bg.minority is not None:
             lines, took = settle_learning(detector, lines, bg, jnp.asarray(float(rig.detection.ghost_edge)))
             self.settled_share = float(jnp.sum(took) / jnp.maximum(jnp.sum(detector.polar.line_ok), 1))
         self.life = start_life(lines)
-        if took is not None:
-            # what was settled is settled: its minority was judged the floor, so the life's quick repair
-            # of the learning's unsettled samples must not take the person who stands on it
-            self.life = eqx.tree_at(lambda life: life.seen, self.life,
-                                    jnp.where(took, float(learning_frames), self.life.seen))
         self.rates = life_rates(rig, fps, learning_frames, every)
         self.learning_frames = learning_frames
         self.counts = LifeCounts()

@@ -209,21 +209,3 @@ def test_settling_the_learning_finds_who_stood_through_it(paper_detector, room, 
     else:
         assert int(np.asarray(took).sum()) == 0
         assert not np.asarray(after.valid).any()
-
-
-def test_the_keeper_counts_what_it_settled_as_settled(paper_rig, paper_detector, room):
-    """The keeper settles the learning when it starts (someone stood through 18 of 30 frames) and counts
-    the samples it took as learnt from the whole window: the life's quick repair of the learning's
-    unsettled samples (UNSETTLED_VOTES) must not take the person who goes on standing there."""
-    from runtime.realtime.perception import BackgroundKeeper
-    from runtime.realtime.targeting import TrustRule
-
-    _, base, person, _ = room
-    rng = np.random.default_rng(41)
-    bg = learn_background(np.stack([_noisy(rng, base if k < 12 else person) for k in range(30)]))
-    keeper = BackgroundKeeper(paper_rig, paper_detector, bg, TrustRule(), 25.0, 30.0)
-    assert keeper.settled_share > 0
-    took = np.any(np.asarray(keeper.lines.mean) != np.asarray(line_background(paper_detector, bg).mean), -1)
-    assert took.sum() > 500
-    seen = np.asarray(keeper.life.seen)
-    assert (seen[took] == 30).all() and np.asarray(learned(1.0 / seen[took], 30)).all()
