@@ -9,7 +9,8 @@ or one behind the other as the camera sees them, and the paper's estimate then f
 1. **psi2 at every line** of the psi1 sectors (:func:`window_sums`): the windowed profile is the
    sum of d^2 over the polar samples across the line, ``window_lines[r]`` lines each side (the
    paper's window: a person's width at that radius), one circular cumulative sum for all lines.
-2. **One person at a time** (:func:`find_people`, a ``lax.scan`` of ``max_people`` steps):
+2. **One person at a time** (:func:`find_people`, a ``lax.while_loop`` of at most ``max_people``
+   passes, ending at the first that finds nobody):
    - eq 12 (corrected) on every line's profile gives that line's best foot hypothesis ``i`` and
      the excess d^2 it holds over the background's mean, ``excess = sum (d2 - dof)``;
    - the line of largest excess among those whose hypothesis is a person is the next person:
@@ -152,8 +153,7 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     n_all = _prefix(window_sums(ok, half))
     dps = dof_per_sample
 
-    def one(carry, _):
-        d2, explained = carry
+    def one(d2, explained):
         Q = window_sums(d2, half)
         PQ = _prefix(Q)
         eq12 = jnp.where(polar.hyp_ok[None], 2 * (PQ[:, out] - PQ[:, :-1]) - PQ[:, -1:], -jnp.inf)
@@ -193,9 +193,20 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
         rec = dict(valid=found, i=i, centre=centre, first=first, last=last, contrast=contrast[t0],
                    excess=excess[t0], support=support[t0], visible=visible,
                    explained=jnp.stack([e_first, e_last, r0, r1]))
-        return (d2, explained | on), rec
+        return d2, explained | on, rec
 
-    _, people = jax.lax.scan(one, (d2, jnp.zeros(d2.shape, bool)), None, length=max_people)
+    # one person a pass, until a pass finds nobody: the passes after it would find nobody either (nothing
+    # is explained, so their table is the same), and their slots stay empty
+    def body(state):
+        k, d2, explained, people, _ = state
+        d2, explained, rec = one(d2, explained)
+        people = jax.tree.map(lambda a, v: a.at[k].set(v), people, rec)
+        return k + 1, d2, explained, people, rec["valid"]
+
+    empty = jax.eval_shape(lambda: one(d2, jnp.zeros(d2.shape, bool))[2])
+    people = jax.tree.map(lambda a: jnp.zeros((max_people, *a.shape), a.dtype), empty)
+    state = (jnp.asarray(0), d2, jnp.zeros(d2.shape, bool), people, jnp.asarray(True))
+    people = jax.lax.while_loop(lambda s: (s[0] < max_people) & s[4], body, state)[3]
     return People(**people)
 
 
