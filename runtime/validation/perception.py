@@ -23,6 +23,12 @@ false alarms
   ``ghost_pause``      a person stood still within :data:`SITE_M` for :data:`PAUSE_S` or more
                        earlier and has gone
   ``moved_object``     within :data:`SITE_M` of a piece of furniture that moved (either place)
+  ``shadow``           within :data:`SHADOW_M` of a visible person's shadow on the floor from a lamp
+                       whose spectrum is not the ambient light's (a coloured shadow: a change of
+                       chromaticity, which eq 5-7 count; a shadow under one spectrum changes only the
+                       brightness): the segment from the foot away from the lamp, as long as the
+                       person's height casts it (every lamp taken as on; up a wall, the shadow's foot
+                       is where the segment meets the wall)
   ``far_field``        beyond :data:`FAR_M` from the camera axis
   ``other``
 misses
@@ -64,11 +70,15 @@ FRAGMENT_M, SITE_M, PAUSE_S, SAME_SECTOR_RAD, FAR_M = 0.7, 0.6, 1.0, 0.35, 2.7
 LEFT_M = 1.0
 #: A person counts as standing at a place in the learning frames when there in this share of them.
 LEARNING_SHARE = 0.2
+#: A false alarm this near (m) to a coloured shadow's axis on the floor lies in it (a body's half width
+#: and the detection's error); a lamp's spectrum is another colour than the ambient light's when their
+#: chromaticities differ by more than SPECTRUM_CHROMA.
+SHADOW_M, SPECTRUM_CHROMA = 0.4, 0.01
 #: Bands of the true foot's floor radius (m) for the NEES.
 RANGE_BANDS = (0.0, 1.5, 2.5, 3.5, math.inf)
 #: The chi-square(1) 99 % point: a Gaussian coordinate's NEES exceeds it with probability 0.01.
 NEES_99 = 6.63
-FA_CAUSES = ("fragment", "ghost_learning", "ghost_pause", "moved_object", "far_field", "other")
+FA_CAUSES = ("fragment", "ghost_learning", "ghost_pause", "moved_object", "shadow", "far_field", "other")
 MISS_CAUSES = ("merged", "ghost_sector", "absorbed_standing", "floor_coloured", "far_field", "other")
 
 
@@ -92,8 +102,9 @@ def wrap_pi(a):
 @dataclass
 class History:
     """What the cause classifier knows of the world: every frame's feet (t, p, 2), who moves (t, p),
-    who is dressed like the floor (p,), the frames the background was learnt from, the fps, and the
-    furniture that moved (footprint centres, m, both places)."""
+    who is dressed like the floor (p,), the frames the background was learnt from, the fps, the
+    furniture that moved (footprint centres, m, both places), the people's heights (p,, m) and the
+    lamps of another colour than the ambient light (positions (L, 3), m)."""
 
     feet: np.ndarray
     moving: np.ndarray
@@ -101,6 +112,8 @@ class History:
     learning_frames: np.ndarray
     fps: float
     moved_furniture: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    heights: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    coloured_lamps: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @classmethod
     def from_truth_lines(cls, lines: list[dict], world: dict, learning_frames, moved_furniture=()) -> History:
@@ -113,7 +126,26 @@ class History:
                 moving[t["frame"], q["id"]] = q["moving"]
         return cls(feet=feet, moving=moving, floor_like=np.array([q["floor_like"] for q in world["people"]], bool),
                    learning_frames=np.asarray(learning_frames, int), fps=float(world["fps"]),
-                   moved_furniture=np.asarray(moved_furniture, float).reshape(-1, 2))
+                   moved_furniture=np.asarray(moved_furniture, float).reshape(-1, 2),
+                   heights=np.array([q["H_p_m"] for q in world["people"]], float),
+                   coloured_lamps=_coloured_lamps(world))
+
+    def in_coloured_shadow(self, frame: int, xy) -> bool:
+        """``xy`` lies within :data:`SHADOW_M` of a visible person's shadow on the floor from a lamp of
+        another colour (the segment from their foot away from the lamp, ``h / (z - h)`` times the
+        lamp's floor distance long)."""
+        if not len(self.coloured_lamps) or not len(self.heights):
+            return False
+        x = np.asarray(xy, float)
+        for foot, h in zip(self.feet[frame], self.heights):
+            if np.isnan(foot).any():
+                continue
+            for lamp in self.coloured_lamps:
+                away = foot - lamp[:2]
+                tip = foot + away * h / max(lamp[2] - h, 0.05)
+                if _segment_distance(x, foot, tip) <= SHADOW_M:
+                    return True
+        return False
 
     def ghost_age(self, frame: int, xy) -> float:
         """Seconds up to ``frame`` (inclusive) since everybody was :data:`LEFT_M` or more from ``xy``,
@@ -154,6 +186,24 @@ class History:
             if now_away and _longest_run(still[:, p]) >= need:
                 return True
         return False
+
+
+def _coloured_lamps(world: dict) -> np.ndarray:
+    """Positions (L, 3) of ``world.json``'s lamps whose spectrum's chromaticity differs from the ambient
+    light's by more than :data:`SPECTRUM_CHROMA`."""
+    lamps = world.get("lamps", [])
+    ambient = np.asarray(world.get("ambient_spectrum", [1.0, 1.0, 1.0]), float)
+    chroma = lambda s: np.asarray(s, float)[:2] / max(float(np.sum(s)), 1e-9)
+    out = [q["position_m"] for q in lamps
+           if np.abs(chroma(q["spectrum"]) - chroma(ambient)).max() > SPECTRUM_CHROMA]
+    return np.asarray(out, float).reshape(-1, 3)
+
+
+def _segment_distance(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """Distance from point ``x`` to the segment ``a``-``b`` (2-D)."""
+    ab = b - a
+    t = np.clip((x - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0)
+    return float(np.linalg.norm(x - (a + t * ab)))
 
 
 def _longest_run(b: np.ndarray) -> int:
@@ -255,6 +305,8 @@ class PerceptionScore:
                 return "ghost_pause"
             if len(history.moved_furniture) and np.min(np.linalg.norm(history.moved_furniture - xy, axis=-1)) <= 1.0:
                 return "moved_object"
+            if history.in_coloured_shadow(frame, xy):
+                return "shadow"
         return "far_field" if np.hypot(*xy) > FAR_M else "other"
 
     @staticmethod

@@ -63,3 +63,21 @@ def test_a_ghost_ages_from_when_its_person_left_and_a_standing_person_counts():
     assert s["misses"] == 1
     # standing: person 1 in frames 12-15, person 0 (still again from frame 5) in 14-15; one missed
     assert s["standing_frames"] == 6 and s["standing_detected_rate"] == pytest.approx(5 / 6)
+
+
+@pytest.mark.parametrize("spectrum, cause", [([0.8, 0.9, 1.0], "shadow"), ([1.0, 0.93, 0.8], "other")])
+def test_a_false_alarm_in_a_coloured_shadow(spectrum, cause):
+    """A lamp 3 m up over the origin and a person 1.5 m tall at (1, 0) cast a shadow on the floor from
+    (1, 0) to (2, 0). A false alarm at (1.8, 0.1) lies in it (0.8 m from the person: no fragment): a
+    shadow when the lamp's spectrum is another colour than the ambient light's, 'other' when it is the
+    same (a shadow under one spectrum changes only the brightness). One at (1.8, 1.0) is 'other' either way."""
+    feet = np.array([[[1.0, 0.0]]] * 4)
+    world = {"people": [{"floor_like": False, "H_p_m": 1.5}], "fps": FPS,  # world.json's keys
+             "lamps": [{"position_m": [0.0, 0.0, 3.0], "intensity": 900.0, "spectrum": spectrum}],
+             "ambient_spectrum": [1.0, 0.93, 0.8]}
+    lines = [{"frame": f, "persons": [{"id": 0, "foot_m": [1.0, 0.0], "moving": False}]} for f in range(4)]
+    hist = History.from_truth_lines(lines, world, learning_frames=[0])
+    score = PerceptionScore()
+    z = np.array([[1.0, 0.0], [1.8, 0.1], [1.8, 1.0]])
+    out = score.add_frame(3, _truth(3, feet[3]), _people(3), z, np.ones((3, 2)), hist)
+    assert [x["cause"] for x in out["false"]] == [cause, "other"]
