@@ -178,8 +178,8 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
         left, right = person_lines(sig, hw)
         first, last = t0 + left, t0 + right
         centre = 0.5 * (first + last)
-        tc = jnp.floor(centre).astype(jnp.int32) % T
-        i = i_line[tc]
+        tc = jnp.floor(centre).astype(jnp.int32)
+        i = i_line[tc % T]
         # explain: the run and the model's width around the centre, the person's radii (tall)
         k = jnp.ceil(0.5 * polar.hyp_width[i] / step).astype(jnp.int32) + MARGIN_LINES
         e_first, e_last = jnp.minimum(first - MARGIN_LINES, tc - k), jnp.maximum(last + MARGIN_LINES, tc + k)

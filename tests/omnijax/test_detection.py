@@ -273,6 +273,32 @@ def test_two_people_in_one_sector_are_two_detections(paper_detector, painted, la
         assert math.remainder(t - t0, 2 * math.pi) == pytest.approx(0.0, abs=0.03)
 
 
+def test_a_person_across_line_0_explains_only_their_own_lines(paper_detector):
+    """On a table of d^2: a person whose strongest lines are 357-359 and whose run goes on to line 10
+    (its centre past line 0), and another at the same radii half a turn away: both are found. (The
+    explained lines once mixed the run's unwrapped ends with its wrapped centre, took the whole circle
+    at the first one's radii, and the second person was never found.)"""
+    from omnijax.detection._blobs import find_people
+
+    det = paper_detector
+    polar, th = det.polar, det.thresholds
+    ok = np.asarray(polar.line_ok, np.float32)
+    i = int(np.argmin(np.abs(np.asarray(polar.hyp_R) - 2.0)))
+    radii = slice(i, int(polar.hyp_out[i]))
+    d2 = 2.0 * ok
+    first_person = np.r_[352:360, 0:11]
+    d2[first_person, radii] = 60.0
+    d2[357:360, radii] = 200.0
+    d2[175:186, radii] = 60.0
+    d2 *= ok
+    people = find_people(polar, jnp.asarray(d2), jnp.asarray(ok), jnp.ones(polar.n_theta, bool), th.window,
+                         th.c_min, det.dof_per_sample, det.sigma_H_p, det.max_people)
+    valid = np.asarray(people.valid)
+    centres = sorted(float(c) % polar.n_theta for c in np.asarray(people.centre)[valid])
+    assert valid.sum() == 2, centres
+    assert centres[0] == pytest.approx(1.0, abs=3) and centres[1] == pytest.approx(180.0, abs=3)
+
+
 def test_empty_frame_has_no_detections(paper_detector, painted):
     rng, base, bg, lines = painted
     for _ in range(5):
