@@ -35,6 +35,8 @@ or one behind the other as the camera sees them, and the paper's estimate then f
 
 from __future__ import annotations
 
+import math
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -95,13 +97,20 @@ def prefix_sums(x: Float[Array, "n ..."]) -> Float[Array, "n_plus_1 ..."]:
     return jnp.concatenate([zero[None], sums], 0)
 
 
-def window_sums(x: Float[Array, "T R"], half: Int[Array, " R"]) -> Float[Array, "T R"]:
-    """Sum of ``x`` over lines ``t - half[r] .. t + half[r]`` (circular in t) at every (t, r)."""
+def window_sums(x: Float[Array, "T R"], half: Int[Array, " R"], reach: int = 0) -> Float[Array, "T R"]:
+    """Sum of ``x`` over lines ``t - half[r] .. t + half[r]`` (circular in t) at every (t, r); ``reach``,
+    if given, is at least ``max(half)`` (static): the table is wrapped round by that many lines each
+    side instead of half the circle (the prefix sum runs over ``T + 2 reach`` lines)."""
     T = x.shape[0]
-    H = x.shape[0] // 2
-    c = prefix_sums(jnp.concatenate([x[T - H:], x, x[:H]], 0))
-    t = jnp.arange(T)[:, None]
-    return jnp.take_along_axis(c, t + H + half[None] + 1, 0) - jnp.take_along_axis(c, t + H - half[None], 0)
+    H = reach if 0 < reach < T // 2 else T // 2
+    return _windows(jnp.concatenate([x[T - H:], x, x[:H]], 0), half, H, T)
+
+
+def _windows(rows: Float[Array, "n R"], half: Int[Array, " R"], reach: int, B: int) -> Float[Array, "B R"]:
+    """Window sums of lines ``reach .. reach + B - 1`` of ``rows`` (``B + 2 reach`` consecutive lines)."""
+    c = prefix_sums(rows)
+    t = jnp.arange(B)[:, None]
+    return jnp.take_along_axis(c, t + reach + half[None] + 1, 0) - jnp.take_along_axis(c, t + reach - half[None], 0)
 
 
 def argmax_rows(x: Float[Array, "n m"]) -> Int[Array, " n"]:
@@ -139,32 +148,58 @@ def person_lines(excess_line: Float[Array, " L"], hw) -> tuple[Array, Array]:
     return -left, right
 
 
+def _band_lines(polar: PolarIndex) -> int:
+    """How many lines a person's pass can change the line figures of (static): the lines it explains
+    (its run, at most :data:`RUN_WIDTHS` x the widest person's half width each side of its line, and
+    the model's half width plus :data:`MARGIN_LINES` round its centre) and a window's reach either
+    side of them; one more for rounding."""
+    T = polar.n_theta
+    run = min(math.ceil(RUN_WIDTHS * polar.person_half_lines) + 1, REACH)
+    k = math.ceil(polar.person_half_lines) + MARGIN_LINES
+    return min(T, 2 * run + 2 * max(MARGIN_LINES, k) + 1 + 2 * polar.window_reach + 1)
+
+
 def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T R"], candidate: Bool[Array, " T"],
                 window: Float[Array, " R"], c_min, dof_per_sample: int, sigma_H_p, max_people: int) -> People:
     """Step 5-6 per person (see the module docstring) on the frame's polar d^2 (``ok`` 1 where a
     sample counts), among the ``candidate`` lines (the psi1 sectors); ``window`` the psi2
-    significance threshold per radius."""
+    significance threshold per radius.
+
+    Each line's figures (its best foot, excess, contrast, support) depend on the samples within a
+    window's reach of it, so after a person is explained only the lines round what it explained
+    change: the first pass computes every line, each later one a band of :func:`_band_lines` lines
+    (the same figures, to float rounding: the sums start elsewhere)."""
     T, R = d2.shape
     step = 2 * jnp.pi / T
     half = polar.window_lines
     out = polar.hyp_out
     r_idx = jnp.arange(R)
     line_idx = jnp.arange(T)
-    n_all = _prefix(window_sums(ok, half))
+    reach = polar.window_reach if 0 < polar.window_reach < T // 2 else T // 2
+    n_all = _prefix(window_sums(ok, half, reach))
     dps = dof_per_sample
 
-    def one(d2, explained):
-        Q = window_sums(d2, half)
+    def figures(d2, explained, start, B):
+        """Lines ``start .. start + B - 1`` (mod T) and their figures: best foot, samples, unexplained
+        samples, excess, contrast, support."""
+        rows = (start - reach + jnp.arange(B + 2 * reach)) % T
+        lines = rows[reach:reach + B]
+        Q = _windows(d2[rows], half, reach, B)
         PQ = _prefix(Q)
         eq12 = jnp.where(polar.hyp_ok[None], 2 * (PQ[:, out] - PQ[:, :-1]) - PQ[:, -1:], -jnp.inf)
         i_line = argmax_rows(eq12)
         o_line = out[i_line]
-        n_line = jnp.maximum(_span(n_all, i_line, o_line), 1.0)
-        vis_line = _span(_prefix(window_sums(ok * (1.0 - explained), half)), i_line, o_line)
+        n_line = jnp.maximum(_span(n_all[lines], i_line, o_line), 1.0)
+        vis_line = _span(_prefix(_windows((ok * (1.0 - explained))[rows], half, reach, B)), i_line, o_line)
         excess = _span(PQ, i_line, o_line) - dps * n_line  # explained samples hold exactly dps
         contrast = excess / jnp.maximum(vis_line, 1.0)
         support = _span(_prefix((Q > window[None]).astype(jnp.float32)), i_line, o_line) / jnp.maximum(
             o_line - i_line, 1)
+        return lines, (i_line, n_line, vis_line, excess, contrast, support)
+
+    def pick(d2, explained, fig):
+        """The next person from every line's figures ``fig``; ``d2`` and ``explained`` with them explained."""
+        i_line, n_line, vis_line, excess, contrast, support = fig
         person = candidate & (contrast >= CONTRAST_FACTOR * c_min) & (support >= SUPPORT)
         score = jnp.where(person, excess, -jnp.inf)
         t0 = jnp.argmax(score)
@@ -178,7 +213,7 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
         left, right = person_lines(sig, hw)
         first, last = t0 + left, t0 + right
         centre = 0.5 * (first + last)
-        tc = jnp.floor(centre).astype(jnp.int32)
+        tc = jnp.floor(centre).astype(jnp.int32)  # unwrapped, as first and last (a run may cross line 0)
         i = i_line[tc % T]
         # explain: the run and the model's width around the centre, the person's radii (tall)
         k = jnp.ceil(0.5 * polar.hyp_width[i] / step).astype(jnp.int32) + MARGIN_LINES
@@ -196,17 +231,25 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
         return d2, explained | on, rec
 
     # one person a pass, until a pass finds nobody: the passes after it would find nobody either (nothing
-    # is explained, so their table is the same), and their slots stay empty
-    def body(state):
-        k, d2, explained, people, _ = state
-        d2, explained, rec = one(d2, explained)
-        people = jax.tree.map(lambda a, v: a.at[k].set(v), people, rec)
-        return k + 1, d2, explained, people, rec["valid"]
+    # is explained, so their table is the same), and their slots stay empty; after the first pass only
+    # the band of lines round what the last person explained is computed again
+    B = _band_lines(polar)
 
-    empty = jax.eval_shape(lambda: one(d2, jnp.zeros(d2.shape, bool))[2])
-    people = jax.tree.map(lambda a: jnp.zeros((max_people, *a.shape), a.dtype), empty)
-    state = (jnp.asarray(0), d2, jnp.zeros(d2.shape, bool), people, jnp.asarray(True))
-    people = jax.lax.while_loop(lambda s: (s[0] < max_people) & s[4], body, state)[3]
+    def body(state):
+        k, d2, explained, fig, people, _ = state
+        e_first = people["explained"][k - 1, 0]
+        lines, band = figures(d2, explained, e_first - reach, B)
+        fig = jax.tree.map(lambda a, v: a.at[lines].set(v), fig, band)
+        d2, explained, rec = pick(d2, explained, fig)
+        people = jax.tree.map(lambda a, v: a.at[k].set(v), people, rec)
+        return k + 1, d2, explained, fig, people, rec["valid"]
+
+    explained = jnp.zeros(d2.shape, bool)
+    _, fig = figures(d2, explained, 0, T)
+    d2, explained, rec = pick(d2, explained, fig)
+    people = jax.tree.map(lambda v: jnp.zeros((max_people, *v.shape), v.dtype).at[0].set(v), rec)
+    state = (jnp.asarray(1), d2, explained, fig, people, rec["valid"])
+    people = jax.lax.while_loop(lambda s: (s[0] < max_people) & s[5], body, state)[4]
     return People(**people)
 
 

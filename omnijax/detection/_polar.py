@@ -52,6 +52,11 @@ class PolarIndex(eqx.Module):
     hyp_dout_dH: Float[Array, " R"]
     hyp_width: Float[Array, " R"]
     image_size: tuple[int, int] = eqx.field(static=True)
+    #: the widest psi2 window's half width (lines): how far a window sum reaches round the circle
+    window_reach: int = eqx.field(static=True, default=0)
+    #: the widest person's half width (lines, over the possible foot hypotheses): how far one person's
+    #: run of lines can reach
+    person_half_lines: float = eqx.field(static=True, default=0.0)
 
     @property
     def n_theta(self) -> int:
@@ -168,5 +173,6 @@ def build_polar_index(rig: Rig) -> PolarIndex:
         window_lines=jnp.asarray(window_lines, dtype=jnp.int32), window_n=jnp.asarray(2.0 * window_lines + 1),
         hyp_out=jnp.asarray(np.minimum(hyp_out, n_r), dtype=jnp.int32), hyp_ok=jnp.asarray(hyp_ok),
         hyp_r_f=jnp.asarray(hyp_r_f), hyp_R=jnp.asarray(hyp_R), hyp_dout_dH=jnp.asarray(dout_dH),
-        hyp_width=jnp.asarray(hyp_width), image_size=(W_img, H_img),
+        hyp_width=jnp.asarray(hyp_width), image_size=(W_img, H_img), window_reach=int(window_lines.max()),
+        person_half_lines=float(0.5 * hyp_width[hyp_ok].max() * det.n_theta / (2 * np.pi)) if hyp_ok.any() else 0.0,
     )

@@ -371,3 +371,52 @@ def test_prefix_sums_and_argmax_rows_match_numpy():
     y[3] = -np.inf
     y[5, [7, 9]] = 10.0  # a tie: the first wins, as np.argmax
     np.testing.assert_array_equal(np.asarray(argmax_rows(jnp.asarray(y))), np.argmax(y, 1))
+
+
+@pytest.mark.parametrize("reach", [0, 22, 40])
+def test_window_sums_wrap_round_the_circle(reach):
+    """psi2's window sums against a brute-force circular sum (NumPy, float64), with the table wrapped
+    by half the circle (reach 0) or by only the widest window (reach >= max(half)); windows that
+    cross line 0 included (fixed seed, a 360 x 174 table, half widths 1-22 as the paper's rig)."""
+    from omnijax.detection._blobs import window_sums
+
+    rng = np.random.default_rng(4)
+    x = rng.uniform(0, 50, (360, 174)).astype(np.float32)
+    half = rng.integers(1, 23, 174)
+    half[0] = 22
+    got = np.asarray(window_sums(jnp.asarray(x), jnp.asarray(half, jnp.int32), reach))
+    t = np.arange(360)[:, None]
+    want = np.zeros(x.shape)
+    for r in range(174):
+        for d in range(-half[r], half[r] + 1):
+            want[:, r] += x[(t[:, 0] + d) % 360, r]
+    np.testing.assert_allclose(got, want, rtol=2e-5, atol=1e-2)
+
+
+def test_later_passes_recompute_only_a_band_of_lines(paper_detector, monkeypatch):
+    """find_people recomputes, after its first pass, only the lines round what the last person explained
+    (``_band_lines``): the same people as recomputing every line (the band made the whole circle), on a
+    d^2 table of eight blobs of random widths, radii and strengths, one across line 0 (fixed seed)."""
+    from omnijax.detection import _blobs
+
+    det = paper_detector
+    polar, th = det.polar, det.thresholds
+    ok = np.asarray(polar.line_ok, np.float32)
+    rng = np.random.default_rng(5)
+    d2 = rng.chisquare(2, ok.shape).astype(np.float32)
+    R = np.asarray(polar.hyp_R)
+    for k, centre in enumerate((0, 40, 75, 130, 170, 215, 260, 320)):
+        i = int(np.argmin(np.abs(R - rng.uniform(0.8, 3.0))))
+        half = int(rng.integers(3, 10))
+        lines = np.arange(centre - half, centre + half + 1) % polar.n_theta
+        d2[np.ix_(lines, np.arange(i, int(polar.hyp_out[i])))] += rng.uniform(20, 200)
+    args = (polar, jnp.asarray(d2 * ok), jnp.asarray(ok), jnp.ones(polar.n_theta, bool), th.window, th.c_min,
+            det.dof_per_sample, det.sigma_H_p, det.max_people)
+    band = _blobs.find_people(*args)
+    assert _blobs._band_lines(polar) < polar.n_theta
+    monkeypatch.setattr(_blobs, "_band_lines", lambda polar: polar.n_theta)
+    full = _blobs.find_people(*args)
+    assert int(np.asarray(band.valid).sum()) >= 6
+    for f in ("valid", "i", "first", "last", "explained"):
+        np.testing.assert_array_equal(np.asarray(getattr(band, f)), np.asarray(getattr(full, f)))
+    np.testing.assert_allclose(np.asarray(band.excess), np.asarray(full.excess), rtol=1e-4)
