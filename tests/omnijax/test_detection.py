@@ -405,7 +405,7 @@ def test_later_passes_recompute_only_a_band_of_lines(paper_detector, monkeypatch
     rng = np.random.default_rng(5)
     d2 = rng.chisquare(2, ok.shape).astype(np.float32)
     R = np.asarray(polar.hyp_R)
-    for k, centre in enumerate((0, 40, 75, 130, 170, 215, 260, 320)):
+    for centre in (0, 40, 75, 130, 170, 215, 260, 320):
         i = int(np.argmin(np.abs(R - rng.uniform(0.8, 3.0))))
         half = int(rng.integers(3, 10))
         lines = np.arange(centre - half, centre + half + 1) % polar.n_theta
