@@ -7,12 +7,6 @@ the first frame, :func:`settle_learning` takes the learning's minority where the
 who stood through most of it (the floor they hid continues the floor around it). Then one jitted
 call per frame (:func:`live_step`), after detection, with the frame's d^2 (the detector's trace):
 
-0. **The other state**: each sample keeps, besides its colour, what the last repair or absorption
-   replaced (:attr:`Life.alt`): the floor as it was under a lamp of another colour before the lamp
-   switched. A sample the frame agrees with better in that state (a smaller d^2) takes it back and
-   keeps the one it had as its other, outside every trusted person's region (a person who comes back
-   to where their own ghost was repaired is not taken back). Detection has used the state it had,
-   so a lamp switching back is a change for one frame instead of until its repair.
 1. **Ghost evidence** of each detection (:func:`ghost_evidence`): is there an object's edge in the
    *current* image at the sides of the person's run of lines? At each radius of the person where
    the sample just inside an edge line has changed, the least d^2 between it and the samples a few
@@ -73,26 +67,21 @@ class Life(eqx.Module):
     """The background at the polar samples and what its life keeps per sample: ``seen`` (frames its
     colour was learnt from, capped), ``prev`` (the last frame's colour), ``still`` (frames it has been
     changed and unchanged from frame to frame), ``ghost`` (frames it has lain, changed, in a ghost's
-    region, net of the frames in a person's: the ghost votes); ``alt``, the sample's other state (what
-    a repair or an absorption replaced: the floor under a lamp of another colour, before it switched),
-    which the sample goes back to when the frame agrees with it better (:func:`live_step`, step 0)."""
+    region, net of the frames in a person's: the ghost votes)."""
 
     lines: LineBackground
     seen: Float[Array, "T R"]
     prev: Float[Array, "T R 3"]
     still: Float[Array, "T R"]
     ghost: Float[Array, "T R"]
-    alt: LineBackground
 
 
-def start_life(lines: LineBackground, alt: LineBackground | None = None) -> Life:
+def start_life(lines: LineBackground) -> Life:
     """A life starting from a learnt background's polar samples (``seen`` from its variance factor:
-    the learning frames each sample kept); ``alt``, the samples' other state (default: none, the
-    background itself; :func:`learning_alternative`)."""
+    the learning frames each sample kept)."""
     seen = 1.0 / jnp.maximum(lines.var_factor, 1e-6)
     zeros = jnp.zeros(seen.shape, jnp.float32)
-    return Life(lines=lines, seen=seen.astype(jnp.float32), prev=lines.mean, still=zeros, ghost=zeros,
-                alt=lines if alt is None else alt)
+    return Life(lines=lines, seen=seen.astype(jnp.float32), prev=lines.mean, still=zeros, ghost=zeros)
 
 
 class Evidence(eqx.Module):
@@ -183,21 +172,15 @@ def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets
     knows to be people who walked in. Returns the new life, each detection's evidence, and which
     detections were judged ghosts."""
     polar = detector.polar
+    lines = life.lines
     cur = gather_rgb(jnp.asarray(frame), polar.line_index).astype(jnp.float32)
     ok = polar.line_ok
-    valid = dets.valid
-    shape = d2.shape
-    # step 0: a sample the frame agrees with better in its other state (a lamp of another colour switched
-    # back) takes that state, and keeps this one as its other (detection used this one: a frame late);
-    # not under a trusted person (their other state may be their own colour, from a ghost of theirs)
-    d2_alt = jnp.where(ok, change_against(cur, life.alt.ref, life.lines.sigma), 0.0)
-    back = ok & (d2_alt < d2) & ~regions(dets, valid & trusted, shape)
-    lines, alt = _swap(life.lines, life.alt, back)
-    d2 = jnp.where(back, d2_alt, d2)
     changed = (d2 > CHANGED) & ok
     ev = ghost_evidence(detector, cur, lines, d2, dets)
+    valid = dets.valid
     sure_ghost = (ev.edge_before > GHOST_RATIO * ev.edge_now) & (ev.edge_now < rates.edge)
     ghostly = valid & jnp.where(trusted, sure_ghost, ev.edge_now < rates.edge)
+    shape = d2.shape
     in_ghost = regions(dets, ghostly, shape)
     people = regions(dets, valid & ~ghostly, shape)
     protected = regions(dets, valid & trusted & ~ghostly, shape)
@@ -225,21 +208,9 @@ def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets
     mean = jnp.where(fix[..., None], cur, lines.mean + a[..., None] * (cur - lines.mean))
     var_factor = jnp.where(fix, 1.0, (1 - a) ** 2 * lines.var_factor + a * a)
     seen = jnp.where(fix, 1.0, jnp.minimum(life.seen + free, rates.learn_frames))
-    # what a repair or an absorption replaces becomes the sample's other state
-    alt = _select(fix, lines, alt)
     new = Life(lines=lines_from(mean, var_factor, lines.sigma), seen=seen, prev=cur,
-               still=jnp.where(fix, 0.0, still), ghost=jnp.where(fix, 0.0, ghost), alt=alt)
+               still=jnp.where(fix, 0.0, still), ghost=jnp.where(fix, 0.0, ghost))
     return new, ev, ghostly
-
-
-def _select(where: Bool[Array, "T R"], a: LineBackground, b: LineBackground) -> LineBackground:
-    """``a``'s samples ``where``, ``b``'s elsewhere (eq 5's terms with them: nothing recomputed)."""
-    return jax.tree.map(lambda x, y: jnp.where(where.reshape(where.shape + (1,) * (x.ndim - where.ndim)), x, y), a, b)
-
-
-def _swap(a: LineBackground, b: LineBackground, where: Bool[Array, "T R"]) -> tuple[LineBackground, LineBackground]:
-    """``a`` and ``b`` with their samples ``where`` exchanged."""
-    return _select(where, b, a), _select(where, a, b)
 
 
 #: Fewest learning frames a minority colour must hold to be taken for the floor (a tenth of 30).

@@ -209,37 +209,3 @@ def test_settling_the_learning_finds_who_stood_through_it(paper_detector, room, 
     else:
         assert int(np.asarray(took).sum()) == 0
         assert not np.asarray(after.valid).any()
-
-
-def test_a_lamp_switching_back_takes_the_floors_other_state(paper_detector, room):
-    """A lamp of another colour lights a patch of floor (a change of chromaticity, not only of brightness).
-    It goes off after the learning: the patch is a change, absorbed after ABSORB frames (nobody trusted
-    claims it). When it comes on again the background goes back to what it replaced (the samples'
-    other state): detected on the first frame only (the swap comes after detection), not for ABSORB
-    frames again."""
-    rng, base, _, i = room
-    lit = base.copy()
-    cx, cy = np.asarray(paper_detector.omni.center)
-    yy, xx = np.mgrid[: base.shape[0], : base.shape[1]]
-    r, th = np.hypot(xx - cx, yy - cy), np.arctan2(yy - cy, xx - cx)
-    patch = (np.abs(np.angle(np.exp(1j * (th - 2.0)))) < 0.4) & (r > float(paper_detector.polar.radii[i]))
-    lit[patch] = lit[patch] * np.array([1.12, 0.97, 0.8])
-    bg = learn_background(np.stack([_noisy(rng, lit) for _ in range(20)]))
-    life = start_life(line_background(paper_detector, bg))
-    life, off, _ = _run(paper_detector, life, [_noisy(rng, base) for _ in range(ABSORB + 3)], False, _rates())
-    assert [bool(v.any()) for v, _ in off[:3]] == [True] * 3 and not any(v.any() for v, _ in off[-2:])
-    _, on, _ = _run(paper_detector, life, [_noisy(rng, lit) for _ in range(4)], False, _rates())
-    assert [bool(v.any()) for v, _ in on] == [True, False, False, False]
-
-
-@pytest.mark.parametrize("trusted", [False, True])
-def test_a_ghosts_colour_back_in_its_place(paper_detector, room, trusted):
-    """Someone stood through the learning and left (their ghost repaired: their colour is the samples'
-    other state), then comes back to the same place: a trusted track keeps them detected; untrusted, the
-    background goes back to them at once (a chair put back where it stood)."""
-    rng, base, person, _ = room
-    bg = learn_background(np.stack([_noisy(rng, person) for _ in range(20)]))
-    life = start_life(line_background(paper_detector, bg))
-    life, _, _ = _run(paper_detector, life, [_noisy(rng, base) for _ in range(GHOST + 4)], False, _rates())
-    _, back, _ = _run(paper_detector, life, [_noisy(rng, person) for _ in range(4)], trusted, _rates())
-    assert [bool(v.any()) for v, _ in back] == ([True] * 4 if trusted else [True, False, False, False])
