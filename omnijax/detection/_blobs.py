@@ -102,8 +102,14 @@ def window_sums(x: Float[Array, "T R"], half: Int[Array, " R"], reach: int = 0) 
     if given, is at least ``max(half)`` (static): the table is wrapped round by that many lines each
     side instead of half the circle (the prefix sum runs over ``T + 2 reach`` lines)."""
     T = x.shape[0]
-    H = reach if 0 < reach < T // 2 else T // 2
+    H = _wrap(T, reach)
     return _windows(jnp.concatenate([x[T - H:], x, x[:H]], 0), half, H, T)
+
+
+def _wrap(T: int, reach: int) -> int:
+    """Lines the table is wrapped round by for window sums that reach ``reach`` lines (half the circle
+    when that is unknown, 0, or more)."""
+    return reach if 0 < reach < T // 2 else T // 2
 
 
 def _windows(rows: Float[Array, "n R"], half: Int[Array, " R"], reach: int, B: int) -> Float[Array, "B R"]:
@@ -175,7 +181,7 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     out = polar.hyp_out
     r_idx = jnp.arange(R)
     line_idx = jnp.arange(T)
-    reach = polar.window_reach if 0 < polar.window_reach < T // 2 else T // 2
+    reach = _wrap(T, polar.window_reach)
     n_all = _prefix(window_sums(ok, half, reach))
     dps = dof_per_sample
 

@@ -53,10 +53,10 @@ class PolarIndex(eqx.Module):
     hyp_width: Float[Array, " R"]
     image_size: tuple[int, int] = eqx.field(static=True)
     #: the widest psi2 window's half width (lines): how far a window sum reaches round the circle
-    window_reach: int = eqx.field(static=True, default=0)
+    window_reach: int = eqx.field(static=True)
     #: the widest person's half width (lines, over the possible foot hypotheses): how far one person's
     #: run of lines can reach
-    person_half_lines: float = eqx.field(static=True, default=0.0)
+    person_half_lines: float = eqx.field(static=True)
 
     @property
     def n_theta(self) -> int:
