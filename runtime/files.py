@@ -94,9 +94,33 @@ def read_json(path: str | Path, kind: str, error: type[Exception] = ConfigError)
         raise error(f"{path}: not valid JSON: {exc}") from None
 
 
+def read_rig_toml(path: str | Path, _within: tuple[Path, ...] = ()) -> dict:
+    """A rig file's tables, with those of the rig file it ``extends`` (a path relative to it) taken key
+    by key where it gives none: ``extends = "paper.toml"`` and one ``[detection]`` key make a site that
+    differs from the paper's rig by that key. Arrays of tables (``[[zones]]``) replace the base's whole."""
+    path = Path(path)
+    data = read_toml(path)
+    base_name = data.pop("extends", None)
+    if base_name is None:
+        return data
+    if not isinstance(base_name, str):
+        raise ConfigError(f"{path}: extends: expected the name of a rig file (a string), got {base_name!r}")
+    base_path = path.parent / base_name
+    if not base_path.is_file():
+        raise ConfigError(f"{path}: extends: no such rig file {str(base_path)!r}")
+    if base_path.resolve() in _within + (path.resolve(),):
+        raise ConfigError(f"{path}: extends: {str(base_path)!r} extends this file again (a loop)")
+    merged = read_rig_toml(base_path, _within + (path.resolve(),))
+    for key, value in data.items():
+        both = isinstance(value, dict) and isinstance(merged.get(key), dict)
+        merged[key] = {**merged[key], **value} if both else value
+    return merged
+
+
 def load_rig(path: str | Path, overrides: dict[str, dict] | None = None,
              flags: dict[str, str] | None = None) -> Rig:
-    """Load and validate a rig file; files it names are read relative to it.
+    """Load and validate a rig file; files it names are read relative to it (:func:`read_rig_toml`: a
+    rig file may extend another).
 
     ``overrides`` ({section: {key: value}}, e.g. from command-line flags) replace
     the file's keys before validation, so they are checked like the file's own
@@ -109,7 +133,7 @@ def load_rig(path: str | Path, overrides: dict[str, dict] | None = None,
     def calib_text(name: str) -> str:
         return read_text(base / name, "calibration file")
 
-    data = read_toml(path)
+    data = read_rig_toml(path)
     source = str(path)
     if overrides:
         for section, keys in overrides.items():

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from annotated_types import Len
 from jaxtyping import Array, Float
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from ..camera import PROFILES, OCamCalib, OmniCamera, parse_ocamcalib
 from ._schema import (
@@ -172,6 +172,7 @@ class Detection(eqx.Module):
     ghost_edge: float = eqx.field(static=True, default=6.0)
     absorb_s: float = eqx.field(static=True, default=60.0)
     off_floor_m: Float[Array, ""] = eqx.field(default=0.5, converter=jnp.asarray)
+    light_axis: tuple[float, float, float] | None = eqx.field(static=True, default=None)
 
 
 class Room(eqx.Module):
@@ -531,6 +532,21 @@ class DetectionSection(Section):
     off_floor_m: Annotated[float, within(0.0, 100.0, "metres", why="larger than any room")] = Field(
         0.5, description="a detection whose foot lies farther than this outside the room's floor (beyond "
                          "the outline, or inside an excluded zone) is no person and is dropped, m")
+    light_axis: Annotated[list[Annotated[float, within(-10.0, 10.0, "log RGB", why="a light e^10 times "
+                                                       "redder than another")]], Len(3, 3)] | None = Field(
+        None, description="lights of two colours (daylight and warm lamps): the direction in log RGB of a "
+                          "change of the light's colour, e.g. log(lamp / daylight); d^2 leaves it out "
+                          "(1 dof per pixel). Default: light of one colour, the paper's 2 dof")
+
+    @field_validator("light_axis")
+    @classmethod
+    def _axis_has_colour(cls, v):
+        if v is not None:
+            m = sum(v) / 3.0
+            if max(abs(x - m) for x in v) < 1e-3:
+                raise ValueError("light_axis must change the light's colour, not only its brightness "
+                                 f"(its three entries must differ; got {list(v)})")
+        return v
 
 
 class ZoomSection(Section):
@@ -820,6 +836,7 @@ def parse_rig(
         background_seconds=de.background_seconds, still_s=de.still_s, ghost_s=de.ghost_s,
         ghost_edge=de.ghost_edge, absorb_s=de.absorb_s,
         off_floor_m=_a(de.off_floor_m),
+        light_axis=None if de.light_axis is None else tuple(float(x) for x in de.light_axis),
     )
     room = Room(outline=_a(f.room.outline), exclude=tuple(_a(p) for p in f.room.exclude))
     return Rig(

@@ -27,7 +27,7 @@ from ..camera import OmniCamera
 from ..config import Rig
 from ..geometry import wrap_2pi
 from ._blobs import People, find_people, merge_fragments
-from ._change import MEASURES, Background, ReferenceTerms, change_against, reference_terms
+from ._change import MEASURES, Background, ReferenceTerms, change_across_light, change_against, reference_terms
 from ._foot import FootSigmaTable, build_foot_sigma_table, foot_sigma_lookup
 from ._indexing import Thresholds, build_thresholds, gather_rgb, hysteresis_sectors
 from ._polar import PolarIndex, build_polar_index
@@ -43,6 +43,9 @@ class Detector(eqx.Module):
     sigma_H_p: Float[Array, ""]
     max_people: int = eqx.field(static=True)
     measure: str = eqx.field(static=True, default="chromaticity")
+    #: ``[detection] light_axis``: a change of the light's colour along it, as far as the change of
+    #: brightness allows, is no change (:func:`~omnijax.detection.change_across_light`)
+    light_axis: tuple[float, float, float] | None = eqx.field(static=True, default=None)
 
     @property
     def dof_per_sample(self) -> int:
@@ -52,7 +55,8 @@ class Detector(eqx.Module):
 def build_detector(rig: Rig, key: PRNGKeyArray | None = None, measure: str = "chromaticity") -> Detector:
     """Polar index, thresholds (simulated eq 9) and the sigma_r_f table for ``rig`` (seconds, once).
 
-    ``measure`` is ``chromaticity`` (the paper's, eq 5-7) or ``grey`` (grey levels,
+    ``measure`` is ``chromaticity`` (the paper's, eq 5-7; with ``[detection] light_axis`` a relighting
+    along it is left out, :func:`~omnijax.detection.change_across_light`) or ``grey`` (grey levels,
     for comparison: what illumination invariance buys).
     """
     if measure not in MEASURES:
@@ -60,12 +64,14 @@ def build_detector(rig: Rig, key: PRNGKeyArray | None = None, measure: str = "ch
     key = jax.random.key(0) if key is None else key
     k_th, k_foot = jax.random.split(key)
     polar = build_polar_index(rig)
+    axis = rig.detection.light_axis if measure == "chromaticity" else None
     dps = MEASURES[measure][1]
     return Detector(
         omni=rig.omni, polar=polar, thresholds=build_thresholds(rig, polar, k_th, dps),
         foot_sigma=build_foot_sigma_table(polar, k_foot, rig.detection.foot_mc_profiles, dps,
                                           rig.sigmas.H_p),
         sigma_H_p=jnp.asarray(rig.sigmas.H_p), max_people=rig.detection.max_people, measure=measure,
+        light_axis=axis,
     )
 
 
@@ -145,11 +151,16 @@ class DetectionTrace(eqx.Module):
 def line_change(detector: Detector, frame: UInt8[Array, "H W 3"], lines: LineBackground) -> Array:
     """Steps 1-2: d^2 at every polar sample (0 where ``line_ok`` is false)."""
     cur = gather_rgb(frame, detector.polar.line_index).astype(jnp.float32)
+    return jnp.where(detector.polar.line_ok, change_at(detector, cur, lines), 0.0)
+
+
+def change_at(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBackground) -> Float[Array, "T R"]:
+    """The detector's change measure of colours ``cur`` at the polar samples against ``lines``."""
+    if detector.light_axis is not None:
+        return change_across_light(cur, lines.mean, lines.var_factor, lines.sigma, detector.light_axis)
     if detector.measure == "chromaticity":
-        d2 = change_against(cur, lines.ref, lines.sigma)
-    else:
-        d2 = MEASURES[detector.measure][0](cur, lines.mean, lines.var_factor, lines.sigma)
-    return jnp.where(detector.polar.line_ok, d2, 0.0)
+        return change_against(cur, lines.ref, lines.sigma)
+    return MEASURES[detector.measure][0](cur, lines.mean, lines.var_factor, lines.sigma)
 
 
 #: Azimuth sigma (rad) of a person who reaches into the blind disc under the camera: the foot is

@@ -48,12 +48,16 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, UInt8
 
 from ._change import AGREE, Background, change_against, change_measure, learned
-from ._detector import Detections, Detector, LineBackground, find_sectors, lines_from, locate_people
+from ._detector import Detections, Detector, LineBackground, change_at, find_sectors, lines_from, locate_people
 from ._indexing import gather_rgb
 
 #: d^2 of a changed sample: the chi-square(2) 1 - 1e-3 quantile (a background sample exceeds it once
 #: in 1,000); also what "unchanged from the previous frame" means.
 CHANGED = AGREE
+#: Under ``[detection] light_axis``: the drift rate per frame of a free sample the light relit (a change
+#: of its chromaticity along the light's axis): the background follows a lamp switching within about
+#: ten frames.
+RELIGHT_RATE = 0.2
 #: A trusted person's detection is a ghost only if the edge before was GHOST_RATIO times the edge now.
 GHOST_RATIO = 4.0
 #: A sample the learning left unsettled is repaired after this many frames still and in a ghost's region.
@@ -203,8 +207,15 @@ def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets
     fix = (repair | absorb) & ok
     free = ok & ~changed & ~occupied
     learning = life.seen < rates.learn_frames - 0.5  # kept in fewer frames than the learning took
-    a = jnp.where(free, jnp.where(learning, jnp.maximum(rates.adapt_rate, 1.0 / (life.seen + 1.0)),
-                                  rates.adapt_rate), 0.0)
+    drift = rates.adapt_rate
+    if detector.light_axis is not None:
+        # lights of two colours: a sample relit (a change to the paper's d^2, none across the light's
+        # colour) follows the light within a few frames, so that the next shadow is measured against
+        # the light as it is now (a lamp switched on, then a person's shadow from the other light: a
+        # swap of the lights no change of brightness bounds)
+        relit = change_against(cur, lines.ref, lines.sigma) > CHANGED
+        drift = jnp.where(relit, jnp.maximum(drift, RELIGHT_RATE), drift)
+    a = jnp.where(free, jnp.where(learning, jnp.maximum(drift, 1.0 / (life.seen + 1.0)), drift), 0.0)
     mean = jnp.where(fix[..., None], cur, lines.mean + a[..., None] * (cur - lines.mean))
     var_factor = jnp.where(fix, 1.0, (1 - a) ** 2 * lines.var_factor + a * a)
     seen = jnp.where(fix, 1.0, jnp.minimum(life.seen + free, rates.learn_frames))
@@ -241,7 +252,7 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
         minority, minority_n = gather_rgb(bg.minority[j], idx), bg.minority_n[j].reshape(-1)[idx]
         has = (minority_n >= MINORITY_FRAMES) & ok & ~took
         composite = jnp.where(has[..., None], minority, lines.mean)
-        d2 = jnp.where(ok, change_against(composite, lines.ref, lines.sigma), 0.0)
+        d2 = jnp.where(ok, change_at(detector, composite, lines), 0.0)
         dets = locate_people(detector, d2, find_sectors(detector, d2.sum(-1)))
         ev = ghost_evidence(detector, composite, lines, d2, dets)
         floor = dets.valid & (ev.edge_now < edge) & (ev.edge_before > GHOST_RATIO * ev.edge_now)

@@ -18,7 +18,7 @@ from annotated_types import Len
 from pydantic import Field, model_validator
 
 from omnijax.config import MAX_PTZS, ConfigError, Coordinate, Section, validate, within
-from runtime.files import read_text, read_toml
+from runtime.files import read_rig_toml, read_text, read_toml
 
 #: What a room's name may hold: it names the room's result file.
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
@@ -102,8 +102,9 @@ def _fingerprint(spec: RoomSpec) -> str:
 
 
 def _rig_data(path: Path) -> tuple[dict, dict[str, str]]:
-    """A rig file's mapping and the text of the calibration file it names (relative to it)."""
-    data = read_toml(path)
+    """A rig file's mapping (with the file it extends) and the text of the calibration file it names
+    (relative to it)."""
+    data = read_rig_toml(path)
     files = {}
     calib = data.get("omni", {}).get("calib_file") if isinstance(data.get("omni"), dict) else None
     if isinstance(calib, str):

@@ -67,6 +67,8 @@ BAD = [
     ("zoom.rule", "widest", "zoom.rule"),
     ("room.outline", [[0.0, 0.0], [1.0, 0.0]], "room.outline"),
     ("omni.center", [320.0], "omni.center"),
+    ("detection.light_axis", [0.5, 0.5, 0.5], "light_axis must change the light's colour"),
+    ("detection.light_axis", [1.0, -1.0], "detection.light_axis"),
 ]
 
 
@@ -189,3 +191,30 @@ def test_foveal_table_count_is_bounded(count):
     d["foveal"] = [copy.deepcopy(d["foveal"]) for _ in range(count)]
     with pytest.raises(ConfigError, match=r"^bad.toml: foveal: expected 1 to 8 \[\[foveal\]\] tables"):
         parse_rig(d, source="bad.toml")
+
+
+def test_a_rig_file_extends_another_key_by_key(tmp_path):
+    """``extends``: the base's tables, this file's keys over them; the shipped two-lights rig is the
+    paper's but for [detection] light_axis."""
+    (tmp_path / "base.toml").write_text((CONFIGS / "paper.toml").read_text())
+    (tmp_path / "site.toml").write_text('extends = "base.toml"\n[detection]\nx_f = 0.02\n')
+    site, paper = load_rig(tmp_path / "site.toml"), load_rig(CONFIGS / "paper.toml")
+    assert float(site.detection.x_f) == 0.02 and float(paper.detection.x_f) == 0.01
+    assert float(site.detection.x_m) == float(paper.detection.x_m)  # the rest of [detection] kept
+    assert float(site.omni.H_o) == float(paper.omni.H_o)
+    two = load_rig(CONFIGS / "two_lights.toml")
+    assert two.detection.light_axis == (0.223, -0.057, -0.431) and paper.detection.light_axis is None
+    assert float(two.detection.c_min) == float(paper.detection.c_min)
+
+
+@pytest.mark.parametrize("text,expect", [
+    ('extends = "none.toml"', "extends: no such rig file"),
+    ("extends = 3", "extends: expected the name of a rig file"),
+    ('extends = "rig.toml"', "a loop"),
+])
+def test_a_bad_extends_is_one_line(tmp_path, text, expect):
+    path = tmp_path / "rig.toml"
+    path.write_text(text + "\n")
+    with pytest.raises(ConfigError, match=expect) as err:
+        load_rig(path)
+    assert "\n" not in str(err.value)

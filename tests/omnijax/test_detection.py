@@ -25,6 +25,7 @@ from omnijax import (
     line_background,
 )
 from omnijax.detection import chi2_variate, noncentral_chi2_variate
+from tests.paths import CONFIGS
 
 
 def _noisy(rng, img, sigma=1.0):
@@ -311,6 +312,30 @@ def test_uniform_lighting_change_is_not_a_person(paper_detector, painted):
     rng, base, bg, lines = painted
     d, _ = detect(paper_detector, jnp.asarray(_noisy(rng, 0.65 * base)), lines)
     assert not bool(np.asarray(d.valid).any())
+
+
+def test_a_lamp_of_another_colour_is_no_person_under_the_light_axis(paper_detector, painted):
+    """The shadow of the warm lamps over a third of a floor lit by them and daylight in equal parts
+    (each channel x D / (D + L) = 1 / (1 + exp(w)), w = configs/two_lights.toml's light axis) is a change
+    to the paper's detector and none under the light axis, which still sees a person of another colour
+    (a green-tinted wedge, as test_detects_a_painted_person)."""
+    from runtime.files import load_rig
+
+    rng, base, bg, _ = painted
+    two = build_detector(load_rig(CONFIGS / "two_lights.toml"))
+    assert two.dof_per_sample == paper_detector.dof_per_sample == 2  # the paper's thresholds
+    H, W = base.shape[:2]
+    pool = (np.mgrid[:H, :W][1] > 2 * W // 3)[..., None]
+    lit = np.where(pool, base / (1.0 + np.exp(np.asarray(two.light_axis))), base)
+    frame = jnp.asarray(_noisy(rng, lit))
+    d_paper, _ = detect(paper_detector, frame, line_background(paper_detector, bg))
+    lines = line_background(two, bg)
+    d_two, _ = detect(two, frame, lines)
+    assert bool(np.asarray(d_paper.valid).any()) and not bool(np.asarray(d_two.valid).any())
+    i = int(np.argmin(np.abs(np.asarray(two.polar.radii) - 70.0)))
+    person = _noisy(rng, _paint_person(rng, base, two, i, 1.0, tint=(0.9, 1.2, 0.9)))
+    d, _ = detect(two, jnp.asarray(person), lines)
+    assert int(np.asarray(d.valid).sum()) == 1
 
 
 @pytest.mark.slow
