@@ -68,7 +68,7 @@ def test_light_axis_leaves_out_what_a_change_of_the_light_can_do():
     D, L = np.array([0.80, 0.90, 1.0]), np.array([1.0, 0.85, 0.65])
     albedo = np.array([0.46, 0.40, 0.33]) * rng.uniform(0.9, 1.1, (n, 3))
     day, lamp = rng.uniform(40.0, 200.0, (n, 1)), rng.uniform(40.0, 200.0, (n, 1))
-    lit = lambda d, l: np.clip(albedo * (d * D + l * L), 0.0, 255.0)
+    lit = lambda d, k: np.clip(albedo * (d * D + k * L), 0.0, 255.0)
     floor = lit(day, lamp)
     noisy = lambda x: x + rng.normal(0.0, sigma, x.shape)
     learnt = lambda x: x + rng.normal(0.0, sigma / np.sqrt(30), x.shape)
