@@ -15,6 +15,8 @@ and everything is written (exit 0); a second one cuts the writing short but keep
 from __future__ import annotations
 
 import contextlib
+import gc
+import os
 import signal
 import threading
 from collections.abc import Iterator
@@ -52,12 +54,29 @@ class Interrupted(KeyboardInterrupt):
 _held: list[str] | None = None
 
 
-def _interrupt(signum: int, _frame) -> None:
+def _interrupt(signum: int, frame) -> None:
     name = signal.Signals(signum).name
     if _held is not None:
         _held.append(name)
         return
+    if _swallows(frame):
+        # an exception raised here would be printed and dropped ("Exception ignored in ...") and the
+        # command would run on: the signal comes again in a moment, in code that unwinds
+        threading.Timer(0.05, os.kill, (os.getpid(), signum)).start()
+        return
     raise Interrupted(name)
+
+
+def _swallows(frame) -> bool:
+    """Whether the code ``frame`` runs in drops exceptions: a garbage collector's callback (JAX has one:
+    a SIGTERM that landed in it let ``omnijax render`` run to the end and write its outputs) or a
+    ``__del__``."""
+    callbacks = {getattr(cb, "__code__", None) for cb in gc.callbacks}
+    while frame is not None:
+        if frame.f_code in callbacks or frame.f_code.co_name == "__del__":
+            return True
+        frame = frame.f_back
+    return False
 
 
 @contextlib.contextmanager

@@ -249,6 +249,29 @@ def test_interrupt_handlers_raise_and_are_put_back():
     assert info.value.signame == "SIGTERM" and signal.getsignal(signal.SIGTERM) is before
 
 
+def test_a_signal_inside_a_garbage_collector_callback_still_interrupts():
+    """SIGTERM arriving while a gc callback runs (JAX registers one): raised there it would be printed and
+    dropped and the command would run on (a render ran to its end and wrote its outputs); it comes
+    again a moment later and interrupts."""
+    import gc
+
+    def callback(phase, info):
+        if phase == "start" and not sent:
+            sent.append(True)
+            os.kill(os.getpid(), signal.SIGTERM)
+            sum(range(1000))  # the handler runs here, inside the callback
+
+    sent: list[bool] = []
+    gc.callbacks.append(callback)
+    try:
+        with pytest.raises(Interrupted) as info, interrupt_handlers():
+            gc.collect()
+            time.sleep(5)
+    finally:
+        gc.callbacks.remove(callback)
+    assert sent and info.value.signame == "SIGTERM"
+
+
 def test_demo_interrupted_during_start_up_says_so_and_writes_nothing(tmp_path, monkeypatch, capsys):
     import omnijax.world
 
