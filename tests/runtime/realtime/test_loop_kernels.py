@@ -52,7 +52,8 @@ def test_perceive_measures_the_detections_on_the_floor_with_the_sigma_rule(paper
 def test_control_step_is_the_tracker_and_the_aim_pipeline_fused(paper_detector, paper_rig, scene):
     """The one per-frame call against its parts called one by one: a confirmed track near the painted
     person is updated as Tracker.step updates it, and aimed at as aim_at_floor aims at its head
-    predicted over the slew time from the last command to where a first aim points."""
+    predicted over the slew time from the last command to where a first aim points, with the floor
+    covariance the prediction's plus the covariance of the detection the track took."""
     import copy
 
     from omnijax import aim_at_floor
@@ -87,10 +88,12 @@ def test_control_step_is_the_tracker_and_the_aim_pipeline_fused(paper_detector, 
     lead = 0.03 + float(pan_tilt_slew_s(now.pan, now.tilt, *sent, 300.0, 125.0))
     assert lead > 0.0 and float(c.lead[0, 0]) == pytest.approx(lead, rel=1e-12)
     xp, Pp = kalman.predict(jnp.asarray(tr.x), jnp.asarray(tr.P), lead, 1.5)
-    want = aim_at_floor(paper_rig, xp[:2], Pp[:2, :2], ZOOM_RULES)
+    want = aim_at_floor(paper_rig, xp[:2], Pp[:2, :2] + R[k], ZOOM_RULES)
     got = jax.tree.map(lambda a: a[0, 0], c.aims)  # the rig's one PTZ, the first confirmed track
     for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(want)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(c.floor_sd[0, 0]), np.sqrt(np.diagonal(np.asarray(Pp[:2, :2] + R[k]))),
+                               rtol=1e-12)
 
 
 def test_perceive_drops_a_detection_whose_foot_is_off_the_floor(paper_detector, paper_rig, scene):
