@@ -11,7 +11,9 @@
    vmapped over the tracks and over the PTZs' stacked one-PTZ rigs, :meth:`~omnijax.Rig.ptz_stack`):
    the head predicted to when that PTZ's pan and tilt get there from its last command (their slew
    time from the pan/tilt of a first aim at the track as it is now; the zoom keeps adjusting
-   meanwhile and does not lengthen the horizon), pan/tilt, their covariance, the zoom of every rule
+   meanwhile and does not lengthen the horizon), from the prediction's floor covariance plus the
+   covariance of the detection the track took (a person's foot errors persist from frame to frame,
+   so the track is no surer than one detection), pan/tilt, their covariance, the zoom of every rule
    and the face's width in pixels at that zoom.
 
 The host then does the bookkeeping (:meth:`~runtime.realtime.tracker.Tracker.apply`), asks the
@@ -79,7 +81,8 @@ class Control(eqx.Module):
     Aims: ``aim_slot`` (A,) the slots of the confirmed tracks (``aim_ok`` (A,) which entries are
     real); per PTZ and track, ``aims`` their :class:`~omnijax.aiming.Aim` (batched, (K, A)), ``lead``
     (K, A) the prediction horizon (s: that PTZ's command latency and slew time to the track),
-    ``floor_sd`` (K, A, 2) the sd of the predicted floor position (m) and ``face_px`` {rule: (K, A)}
+    ``floor_sd`` (K, A, 2) the sd of the floor position the aim used (m: the prediction's covariance plus
+    the covariance of the detection the track took) and ``face_px`` {rule: (K, A)}
     the head's width in the PTZ's image at that rule's zoom (px)."""
 
     dets: object
@@ -125,11 +128,11 @@ def control_step(detector: Detector, rig: Rig, frame, lines, slots, t, accel_sd,
         lead = jnp.where(slew.known, slew.latency_s + pan_tilt_slew_s(now.pan, now.tilt, slew.pan, slew.tilt,
                                                                       slew.pan_deg_s, slew.tilt_deg_s), 0.0)
         xp, Pp = kalman.predict(x, P, lead, accel_sd)
-        Pp = Pp[:2, :2] + R_det
-        aimed = aim_at_floor(ptz, xp[:2], Pp, ZOOM_RULES)
+        floor_cov = Pp[:2, :2] + R_det
+        aimed = aim_at_floor(ptz, xp[:2], floor_cov, ZOOM_RULES)
         face = {rule: face_pixels(ptz.foveal.lens, aimed.zooms[rule].zoom, aimed.pointing.slant, ptz.person.R_h)
                 for rule in ZOOM_RULES}
-        return aimed, lead, jnp.sqrt(jnp.diagonal(Pp)), face
+        return aimed, lead, jnp.sqrt(jnp.diagonal(floor_cov)), face
 
     def camera(ptz, slew):
         return jax.vmap(functools.partial(one, ptz, slew))(x_new[aim_slot], P_new[aim_slot], R_taken[aim_slot])

@@ -84,7 +84,7 @@ class Command:
     sent: bool
     t_predicted: float
     aimed: Aim | None = None
-    floor_sd: np.ndarray | None = None  # sd of the predicted floor position (X, Y), m
+    floor_sd: np.ndarray | None = None  # sd of the floor position the aim used (X, Y), m (control.Control)
     xy: np.ndarray | None = None
 
 
