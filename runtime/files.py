@@ -110,8 +110,14 @@ def read_rig_toml(path: str | Path, _within: tuple[Path, ...] = ()) -> dict:
         raise ConfigError(f"{path}: extends: no such rig file {str(base_path)!r}")
     if base_path.resolve() in _within + (path.resolve(),):
         raise ConfigError(f"{path}: extends: {str(base_path)!r} extends this file again (a loop)")
-    merged = read_rig_toml(base_path, _within + (path.resolve(),))
-    for key, value in data.items():
+    return over_tables(read_rig_toml(base_path, _within + (path.resolve(),)), data)
+
+
+def over_tables(base: dict, over: dict) -> dict:
+    """``base`` with ``over``'s keys laid over it table by table: a table's keys replace the base table's
+    one by one, anything else (a value, an array of tables) replaces it whole. Neither is changed."""
+    merged = dict(base)
+    for key, value in over.items():
         both = isinstance(value, dict) and isinstance(merged.get(key), dict)
         merged[key] = {**merged[key], **value} if both else value
     return merged
@@ -135,11 +141,10 @@ def load_rig(path: str | Path, overrides: dict[str, dict] | None = None,
 
     data = read_rig_toml(path)
     source = str(path)
-    if overrides:
-        for section, keys in overrides.items():
-            if keys:
-                data[section] = {**data.get(section, {}), **keys}
-                source = f"{path} (with command-line overrides)"
+    given = {section: keys for section, keys in (overrides or {}).items() if keys}
+    if given:
+        data = over_tables(data, given)
+        source = f"{path} (with command-line overrides)"
     try:
         return build_rig(data, source, calib_text)
     except ConfigError as exc:
