@@ -59,6 +59,7 @@ from ._life import (
     regions as regions,
     settle_learning as settle_learning,
     start_life as start_life,
+    verdicts as verdicts,
 )
 from ._polar import (
     PolarIndex as PolarIndex,

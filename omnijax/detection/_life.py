@@ -11,25 +11,25 @@ call per frame (:func:`live_step`), after detection, with the frame's d^2 (the d
    *current* image at the sides of the person's run of lines? At each radius of the person where
    the sample just inside an edge line has changed, the least d^2 between it and the samples a few
    pixels outside that edge, in the current frame (``edge_now``) and in the background
-   (``edge_before``); each side averaged over its radii, and the side with less edge now taken (a
-   ghost continues the floor on at least one side, whatever adjoins the other). A person (standing
-   too) differs from the floor beside them: hundreds. A ghost (the background still holds someone
-   who has gone, or a piece of furniture moved away) shows floor continuing the floor beside it,
-   about 1, while the background there had an edge. Chromaticity makes this hold under shadows and
-   the floor's shading. The caller says which detections are trusted people (their tracks walked
+   (``edge_before``), each side averaged over its radii. A person (standing too) differs from the
+   floor beside them: hundreds. A ghost (the background still holds someone who has gone, or a piece
+   of furniture moved away) shows floor continuing the floor beside it, about 1, while the background
+   there had an edge. Chromaticity makes this hold under shadows and the floor's shading. The
+   verdict (:func:`verdicts`) is per side: a ghost needs one side with no edge now and more before,
+   and no side with a person's edge (a ghost continues the floor on at least one side, whatever
+   adjoins the other). The caller says which detections are trusted people (their tracks walked
    in): those are ghosts only with both signs (no edge now, an edge :data:`GHOST_RATIO` times
-   stronger before); the others when there is no edge now (``edge_now < edge``) and less of one
-   than in the background (``edge_before > edge_now``). A faint edge now and less before (a person
-   of nearly the floor's colour) is no verdict: neither a ghost's vote nor a person's. A lamp of
-   another colour switching on a bare floor has about the same (no) edge in both, and gets a ghost's
-   vote in about every other frame.
+   stronger before); the others with any more edge before than now. A faint edge now and less
+   before (a person of nearly the floor's colour) is no verdict: neither a ghost's vote nor a
+   person's. A lamp of another colour switching on a bare floor has about the same (no) edge in
+   both, and gets a ghost's vote in about every other frame.
 2. **Repair**: a sample that has changed, stayed unchanged from frame to frame (still) for
    ``still_frames`` and gathered ``ghost_frames`` votes of a ghost is re-learnt from the current frame
    (its variance factor 1: one frame's estimate). The votes are counted while the sample stays
    changed: +1 for each frame it lies in a ghost's region, -1 for each frame it lies in a person's
-   (a detection with an edge now), none while no detection claims it or gives no verdict; a ghost's evidence flickers
-   about the threshold from frame to frame, and a run of ghost frames would be broken by each
-   flicker.
+   (a detection with a person's edge), none while no detection claims it or gives no verdict; a
+   ghost's evidence flickers about the threshold from frame to frame, and a run of ghost frames
+   would be broken by each flicker.
    A sample the learning left unsettled (kept in fewer than two thirds of its frames: someone
    stood there through a third of them) is repaired after :data:`UNSETTLED_VOTES` such frames when
    the ghost shows both signs (an edge in the background, none now): the ghosts of the learning.
@@ -93,13 +93,26 @@ def start_life(lines: LineBackground) -> Life:
 
 
 class Evidence(eqx.Module):
-    """Per detection: the edge at its sides now and in the background (least d^2, averaged over a side's
-    radii, of the side with less edge now; ``inf`` where no changed sample was measured), and the radii
-    measured on that side."""
+    """Per detection and side (left, right): the edge now and in the background (least d^2, averaged
+    over the side's radii; ``inf`` where no changed sample was measured there), and the radii measured."""
 
-    edge_now: Float[Array, " K"]
-    edge_before: Float[Array, " K"]
-    samples: Float[Array, " K"]
+    edge_now: Float[Array, "K 2"]
+    edge_before: Float[Array, "K 2"]
+    samples: Float[Array, "K 2"]
+
+
+def verdicts(ev: Evidence, trusted: Bool[Array, " K"], edge) -> tuple[Array, Array]:
+    """(ghost, person) per detection from its two sides. A side shows a *person* when it has an edge now
+    (``edge_now >= edge``) :data:`GHOST_RATIO` times what the background shows there (a static edge, a
+    table's, is in both); a *ghost* when it has none now (``< edge``) and more in the background: for a
+    trusted detection :data:`GHOST_RATIO` times more (both signs), for the others any more. A detection
+    is a ghost when a side shows one and no side shows a person (a ghost continues the floor on at least
+    one side, whatever adjoins the other; someone standing against a table of their colour still has
+    their edge on the open side). Neither (a faint edge now and less before) is no verdict."""
+    ratio = jnp.where(trusted, GHOST_RATIO, 1.0)[:, None]
+    ghost_side = (ev.edge_now < edge) & (ev.edge_before > ratio * ev.edge_now)
+    person = jnp.any((ev.edge_now >= edge) & (ev.edge_now > GHOST_RATIO * ev.edge_before), axis=-1)
+    return jnp.any(ghost_side, axis=-1) & ~person, person
 
 
 def ghost_evidence(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBackground,
@@ -141,15 +154,12 @@ def ghost_evidence(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBa
         before = least(lines.mean, lines.var_factor)
         return now, before, changed[a, rr] & radial
 
-    # each side on its own: a ghost continues the floor on at least one side, whatever the other adjoins
-    # (a table, a wall, someone passing); taking the two sides radius by radius let a side against
+    # each side on its own (see verdicts): taking the two sides radius by radius let a side against
     # furniture speak for the radii where only it was measured (three_people 8810: a ghost of the
     # learning kept all clip, edge now 30 from the table beside it, about 1 on its open side)
-    sides = [_side_means(*side(first, -1)), _side_means(*side(last, 1))]
-    (now_l, before_l, n_l), (now_r, before_r, n_r) = sides
-    left = now_l <= now_r
-    return Evidence(edge_now=jnp.where(left, now_l, now_r), edge_before=jnp.where(left, before_l, before_r),
-                    samples=jnp.where(left, n_l, n_r).astype(jnp.float32))
+    (now_l, before_l, n_l), (now_r, before_r, n_r) = _side_means(*side(first, -1)), _side_means(*side(last, 1))
+    return Evidence(edge_now=jnp.stack([now_l, now_r], -1), edge_before=jnp.stack([before_l, before_r], -1),
+                    samples=jnp.stack([n_l, n_r], -1).astype(jnp.float32))
 
 
 def _side_means(now, before, measured):
@@ -196,17 +206,15 @@ def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets
     changed = (d2 > CHANGED) & ok
     ev = ghost_evidence(detector, cur, lines, d2, dets)
     valid = dets.valid
-    sure_ghost = (ev.edge_before > GHOST_RATIO * ev.edge_now) & (ev.edge_now < rates.edge)
-    # untrusted: no edge now, and less of one now than in the background; a faint edge now and less
-    # before is no verdict: the vote waits (a standing person never seen walking in, whose edge now
-    # flickered about the threshold, 3.5-50 against none before, used to be voted into the
-    # background: stops_a_minute 8506, detected in 0.26 of their minute)
-    faint = ev.edge_now < rates.edge
-    ghostly = valid & jnp.where(trusted, sure_ghost, faint & (ev.edge_before > ev.edge_now))
-    unsure = valid & ~trusted & faint & ~ghostly
+    sure_ghost, _ = verdicts(ev, jnp.ones_like(trusted), rates.edge)  # both signs, as for the trusted
+    # a faint edge now and less before is no verdict: the vote waits (a standing person never seen
+    # walking in, whose edge now flickered about the threshold, 3.5-50 against none before, used to be
+    # voted into the background: stops_a_minute 8506, detected in 0.26 of their minute)
+    ghost, person = verdicts(ev, trusted, rates.edge)
+    ghostly = valid & ghost
     shape = d2.shape
     in_ghost = regions(dets, ghostly, shape)
-    people = regions(dets, valid & ~ghostly & ~unsure, shape)
+    people = regions(dets, valid & person, shape)
     protected = regions(dets, valid & trusted & ~ghostly, shape)
     occupied = regions(dets, valid, shape)
     static = change_measure(cur, life.prev, 1.0, lines.sigma) < CHANGED
@@ -275,7 +283,7 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
         d2 = jnp.where(ok, change_at(detector, composite, lines), 0.0)
         dets = locate_people(detector, d2, find_sectors(detector, d2.sum(-1)))
         ev = ghost_evidence(detector, composite, lines, d2, dets)
-        floor = dets.valid & (ev.edge_now < edge) & (ev.edge_before > GHOST_RATIO * ev.edge_now)
+        floor = dets.valid & verdicts(ev, jnp.ones_like(dets.valid), edge)[0]
         take = regions(dets, floor, d2.shape) & has & (d2 > CHANGED)
         mean = jnp.where(take[..., None], minority, lines.mean)
         var_factor = jnp.where(take, 1.0 / jnp.maximum(minority_n, 1.0), lines.var_factor)

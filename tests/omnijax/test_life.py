@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from omnijax import detect, learn_background, line_background
-from omnijax.detection import LifeRates, learned, live_step, start_life
+from omnijax.detection import LifeRates, learned, live_step, start_life, verdicts
 from tests.omnijax.test_detection import _noisy, _paint_person
 
 #: Frames in these tests: a changed sample must stay still STILL frames and lie in a ghost GHOST frames
@@ -62,11 +62,11 @@ def test_ghost_evidence_tells_a_person_from_a_ghost(paper_detector, room):
         _, found, ev = _run(paper_detector, life, [_noisy(rng, now)], False, _rates())
         k = int(np.argmax(found[0][0]))
         assert found[0][0].sum() == 1
-        e_now, e_before = float(ev.edge_now[k]), float(ev.edge_before[k])
+        e_now, e_before = np.asarray(ev.edge_now[k]), np.asarray(ev.edge_before[k])  # left and right sides
         if is_ghost:
-            assert e_now < 3.0 and e_before > 50 * e_now and found[0][1][k]
+            assert np.all(e_now < 3.0) and np.all(e_before > 50 * e_now) and found[0][1][k]
         else:
-            assert e_now > 50 and e_before < 3.0 and not found[0][1][k]
+            assert np.all(e_now > 50) and np.all(e_before < 3.0) and not found[0][1][k]
 
 
 @pytest.mark.parametrize("trusted", [False, True])
@@ -242,7 +242,46 @@ def test_a_ghost_beside_furniture_is_still_a_ghost(paper_detector, room):
     mean[beyond, outer[None]] = (40.0, 70.0, 160.0)
     lines = lines_from(jnp.asarray(mean), lines.var_factor, lines.sigma)
     ev = ghost_evidence(det, jnp.asarray(cur), lines, jnp.asarray(d2), dets)
-    assert float(ev.edge_now[k]) < 3.0 and float(ev.edge_before[k]) > 50 * float(ev.edge_now[k])
+    (now_l, now_r), (before_l, before_r) = np.asarray(ev.edge_now[k]), np.asarray(ev.edge_before[k])
+    assert now_l < 3.0 and before_l > 50 * now_l  # the open side continues the floor
+    assert now_r > 50 and before_r > 50  # the cupboard's edge, now and before
+    for trusted in (False, True):
+        ghost, person = verdicts(ev, jnp.full(dets.valid.shape, trusted), 6.0)
+        assert bool(ghost[k]) and not bool(person[k])
+
+
+def test_a_person_against_a_table_of_their_colour_is_no_ghost(paper_detector, room):
+    """Someone standing against a table of their own colour: that side has no edge now and the table's
+    edge in the background (a ghost's two signs, on that side); the open side has the person's edge,
+    and a person's edge on any side vetoes the ghost."""
+    from omnijax.detection import ghost_evidence, lines_from
+    from omnijax.detection._indexing import gather_rgb
+
+    rng, base, person, _ = room
+    det = paper_detector
+    empty = learn_background(np.stack([_noisy(rng, base) for _ in range(20)]))
+    lines = line_background(det, empty)
+    now = _noisy(rng, person)
+    dets, trace = detect(det, jnp.asarray(now), lines)
+    k = int(np.argmax(np.asarray(dets.valid)))
+    cur = np.asarray(gather_rgb(jnp.asarray(now), det.polar.line_index), np.float32)
+    mean = np.array(lines.mean)
+    T = det.polar.n_theta
+    step = 2 * np.pi / T
+    first = int(round(float(dets.theta_l[k]) / step))
+    last = first + int(round(float((dets.theta_r[k] - dets.theta_l[k]) % (2 * np.pi)) / step))
+    inside = cur[(last - 2) % T]  # the person's colour at each radius, just inside the right edge
+    beyond = (last + np.arange(1, 12)) % T
+    cur[beyond] = inside[None]
+    mean[beyond] = inside[None]
+    lines = lines_from(jnp.asarray(mean), lines.var_factor, lines.sigma)
+    ev = ghost_evidence(det, jnp.asarray(cur), lines, trace.d2, dets)
+    (now_l, now_r), (before_l, before_r) = np.asarray(ev.edge_now[k]), np.asarray(ev.edge_before[k])
+    assert now_r < 3.0 and before_r > 50 * now_r  # the table side looks like a ghost's
+    assert now_l > 50 and before_l < 3.0  # the open side: a person
+    for trusted in (False, True):
+        ghost, person = verdicts(ev, jnp.full(dets.valid.shape, trusted), 6.0)
+        assert bool(person[k]) and not bool(ghost[k])
 
 
 def test_an_untrusted_person_with_a_faint_edge_is_not_voted_away(paper_detector, room):
@@ -256,5 +295,6 @@ def test_an_untrusted_person_with_a_faint_edge_is_not_voted_away(paper_detector,
     frames = [_noisy(rng, faint) for _ in range(GHOST + 4)]
     _, found, ev = _run(paper_detector, start_life(line_background(paper_detector, bg)), frames, False, rates)
     k = int(np.argmax(found[-1][0]))
-    assert float(ev.edge_now[k]) < 10.0 and float(ev.edge_before[k]) < float(ev.edge_now[k])
+    now, before = np.asarray(ev.edge_now[k]), np.asarray(ev.edge_before[k])
+    assert np.all(now < 10.0) and np.all(before < now)
     assert all(v.sum() == 1 and not g.any() for v, g in found)
