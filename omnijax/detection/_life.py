@@ -210,11 +210,11 @@ def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets
     # a faint edge now and less before is no verdict: the vote waits (a standing person never seen
     # walking in, whose edge now flickered about the threshold, 3.5-50 against none before, used to be
     # voted into the background: stops_a_minute 8506, detected in 0.26 of their minute)
-    ghost, person = verdicts(ev, trusted, rates.edge)
-    ghostly = valid & ghost
+    is_ghost, is_person = verdicts(ev, trusted, rates.edge)
+    ghostly = valid & is_ghost
     shape = d2.shape
     in_ghost = regions(dets, ghostly, shape)
-    people = regions(dets, valid & person, shape)
+    people = regions(dets, valid & is_person, shape)
     protected = regions(dets, valid & trusted & ~ghostly, shape)
     occupied = regions(dets, valid, shape)
     static = change_measure(cur, life.prev, 1.0, lines.sigma) < CHANGED
