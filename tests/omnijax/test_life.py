@@ -211,27 +211,34 @@ def test_settling_the_learning_finds_who_stood_through_it(paper_detector, room, 
         assert not np.asarray(after.valid).any()
 
 
+def _one_detection_in_polar(det, bg_frames, now):
+    """The one detection of ``now`` against the background learnt from ``bg_frames``, with what the
+    evidence tests paint on: the lines, the frame and the background's colours at the polar samples
+    (writable), d^2, the detection's index and its first and last lines."""
+    from omnijax.detection._indexing import gather_rgb
+
+    lines = line_background(det, learn_background(np.stack(bg_frames)))
+    dets, trace = detect(det, jnp.asarray(now), lines)
+    k = int(np.argmax(np.asarray(dets.valid)))
+    cur = np.asarray(gather_rgb(jnp.asarray(now), det.polar.line_index), np.float32)
+    step = 2 * np.pi / det.polar.n_theta
+    first = int(round(float(dets.theta_l[k]) / step))
+    last = first + int(round(float((dets.theta_r[k] - dets.theta_l[k]) % (2 * np.pi)) / step))
+    return lines, dets, cur, np.array(lines.mean), np.array(trace.d2), k, first, last
+
+
 def test_a_ghost_beside_furniture_is_still_a_ghost(paper_detector, room):
     """A ghost whose one side adjoins furniture over the radii where only that side is measured: its
     other side continues the floor, and each side judged on its own says ghost (taking the sides radius
     by radius mixed the furniture's edge into the evidence: three_people 8810 kept such a ghost all
     clip)."""
     from omnijax.detection import ghost_evidence, lines_from
-    from omnijax.detection._indexing import gather_rgb
 
     rng, base, person, _ = room
     det = paper_detector
-    held = learn_background(np.stack([_noisy(rng, person) for _ in range(20)]))
-    lines = line_background(det, held)
-    now = _noisy(rng, base)
-    dets, trace = detect(det, jnp.asarray(now), lines)
-    k = int(np.argmax(np.asarray(dets.valid)))
-    cur = np.asarray(gather_rgb(jnp.asarray(now), det.polar.line_index), np.float32)
-    mean, d2 = np.array(lines.mean), np.array(trace.d2)
     T = det.polar.n_theta
-    step = 2 * np.pi / T
-    first = int(round(float(dets.theta_l[k]) / step))
-    last = first + int(round(float((dets.theta_r[k] - dets.theta_l[k]) % (2 * np.pi)) / step))
+    lines, dets, cur, mean, d2, k, first, last = _one_detection_in_polar(
+        det, [_noisy(rng, person) for _ in range(20)], _noisy(rng, base))
     r0, r1 = (int(v) for v in np.asarray(dets.region[k])[2:])
     outer = np.arange((r0 + r1) // 2, r1)
     # the outer radii: the ghost's left edge lies further in (unchanged there), and a blue cupboard stands
@@ -255,27 +262,18 @@ def test_a_person_against_a_table_of_their_colour_is_no_ghost(paper_detector, ro
     edge in the background (a ghost's two signs, on that side); the open side has the person's edge,
     and a person's edge on any side vetoes the ghost."""
     from omnijax.detection import ghost_evidence, lines_from
-    from omnijax.detection._indexing import gather_rgb
 
     rng, base, person, _ = room
     det = paper_detector
-    empty = learn_background(np.stack([_noisy(rng, base) for _ in range(20)]))
-    lines = line_background(det, empty)
-    now = _noisy(rng, person)
-    dets, trace = detect(det, jnp.asarray(now), lines)
-    k = int(np.argmax(np.asarray(dets.valid)))
-    cur = np.asarray(gather_rgb(jnp.asarray(now), det.polar.line_index), np.float32)
-    mean = np.array(lines.mean)
     T = det.polar.n_theta
-    step = 2 * np.pi / T
-    first = int(round(float(dets.theta_l[k]) / step))
-    last = first + int(round(float((dets.theta_r[k] - dets.theta_l[k]) % (2 * np.pi)) / step))
+    lines, dets, cur, mean, d2, k, first, last = _one_detection_in_polar(
+        det, [_noisy(rng, base) for _ in range(20)], _noisy(rng, person))
     inside = cur[(last - 2) % T]  # the person's colour at each radius, just inside the right edge
     beyond = (last + np.arange(1, 12)) % T
     cur[beyond] = inside[None]
     mean[beyond] = inside[None]
     lines = lines_from(jnp.asarray(mean), lines.var_factor, lines.sigma)
-    ev = ghost_evidence(det, jnp.asarray(cur), lines, trace.d2, dets)
+    ev = ghost_evidence(det, jnp.asarray(cur), lines, jnp.asarray(d2), dets)
     (now_l, now_r), (before_l, before_r) = np.asarray(ev.edge_now[k]), np.asarray(ev.edge_before[k])
     assert now_r < 3.0 and before_r > 50 * now_r  # the table side looks like a ghost's
     assert now_l > 50 and before_l < 3.0  # the open side: a person
