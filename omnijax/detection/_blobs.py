@@ -11,7 +11,7 @@ or one behind the other as the camera sees them, and the paper's estimate then f
    paper's window: a person's width at that radius), one circular cumulative sum for all lines.
 2. **One person at a time** (:func:`find_people`, a ``lax.while_loop`` of at most ``max_people``
    passes, ending at the first that finds nobody):
-   - eq 12 (corrected, :mod:`._foot`) on every line's profile gives that line's best foot hypothesis ``i`` and
+   - eq 12 (corrected) on every line's profile gives that line's best foot hypothesis ``i`` and
      the excess d^2 it holds over the background's mean, ``excess = sum (d2 - dof)``;
    - the line of largest excess among those whose hypothesis is a person is the next person:
      its contrast over its samples not yet explained (the non-centrality per sample, eq 9's

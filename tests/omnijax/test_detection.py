@@ -159,8 +159,8 @@ def test_foot_scores_are_eq_12_brute_force(paper_detector, seed):
     ours = np.asarray(jax.jit(foot_scores, static_argnums=(3,))(jnp.asarray(p), jnp.asarray(n), polar, dof, c_min))
     ends, z, ok = np.asarray(polar.hyp_out_h), np.asarray(polar.height_z), np.asarray(polar.hyp_ok)
     for i in rng.choice(np.nonzero(ok)[0], 10):
-        per_height = [sum(p[r] - (dof + c_min / 2) * n[r] for r in range(i, ends[k, i]))
-                      - (2 * dof / c_min) * z[k] ** 2 / 2 for k in range(len(z))]
+        per_height = [sum(p[r] - (dof + c_min / 2) * n[r] for r in range(i, ends[k, i])) - (2 * dof / c_min) * z[k] ** 2 / 2
+                      for k in range(len(z))]
         assert ours[i] == pytest.approx(max(per_height), rel=1e-9, abs=1e-6)
     assert np.all(np.isneginf(ours[~ok]))
 
