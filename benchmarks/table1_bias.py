@@ -32,23 +32,33 @@ import json
 import time
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
+from omnijax import floor_radius, person_image_extent, point_image_radius
 from omnijax.detection import _polar
+from omnijax.detection._polar import body_radius
 from runtime.files import load_rig
 from runtime.validation import endtoend as e
 
 VARIANTS = ("table1", "prior_size", "no_shadow", "exact", "axis_model", "axis_prior_size")
 
 
-def _axis_tables(rig, radii, theta, z):
+@jax.jit
+def _axis_tables(rig, radii, theta):
     """``omnijax.detection._polar._geometry_tables`` with the axis ``rho`` beyond the inner end, not
     ``pi rho / 4``: the ``axis_model`` variant."""
-    return _SAVED_TABLES(rig, radii, theta, z, 1.0)
-
-
-_SAVED_TABLES = _polar._geometry_tables
+    omni = rig.omni
+    x, y = omni.to_pixel(radii[None, :], theta[:, None])
+    R_floor = floor_radius(radii, omni.r_m, omni.H_o, omni.profile)[0]
+    rho = body_radius(rig)
+    R_axis = R_floor + rho
+    outer = lambda H_p: person_image_extent(R_axis, omni, H_p, rig.person.R_h, rho)[1]
+    r_out, dout_dH = jax.jvp(outer, (rig.person.H_p,), (jnp.ones_like(rig.person.H_p),))
+    r_f = point_image_radius(R_axis, 0.0, omni.r_m, omni.H_o, omni.profile)
+    width = 2 * jnp.arcsin(jnp.minimum(rho / R_axis, 1.0))
+    return x, y, R_floor, r_out, r_f, dout_dH, width, R_axis
 
 
 def _axis_bench(rig, seed, positions):

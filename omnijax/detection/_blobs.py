@@ -42,7 +42,6 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from ._foot import foot_scores_prefix, midpoint
 from ._polar import PolarIndex
 
 #: A person's contrast over its unexplained samples must reach CONTRAST_FACTOR x ``c_min``.
@@ -185,7 +184,6 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     reach = _wrap(T, polar.window_reach)
     n_all = _prefix(window_sums(ok, half, reach))
     dps = dof_per_sample
-    mid, prior_weight = midpoint(dps, c_min)
 
     def figures(d2, explained, start, B):
         """Lines ``start .. start + B - 1`` (mod T) and their figures: best foot, samples, unexplained
@@ -194,14 +192,11 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
         lines = rows[reach:reach + B]
         Q = _windows(d2[rows], half, reach, B)
         PQ = _prefix(Q)
-        NU = _prefix(_windows((ok * (1.0 - explained))[rows], half, reach, B))
-        # an explained sample (another person's, holding exactly dps) is no evidence either way: it
-        # weighs nothing in the foot's score, the unexplained ones their excess over the midpoint
-        eq12 = foot_scores_prefix(PQ - dps * n_all[lines] - (mid - dps) * NU, polar, prior_weight)
+        eq12 = jnp.where(polar.hyp_ok[None], 2 * (PQ[:, out] - PQ[:, :-1]) - PQ[:, -1:], -jnp.inf)
         i_line = argmax_rows(eq12)
         o_line = out[i_line]
         n_line = jnp.maximum(_span(n_all[lines], i_line, o_line), 1.0)
-        vis_line = _span(NU, i_line, o_line)
+        vis_line = _span(_prefix(_windows((ok * (1.0 - explained))[rows], half, reach, B)), i_line, o_line)
         excess = _span(PQ, i_line, o_line) - dps * n_line  # explained samples hold exactly dps
         contrast = excess / jnp.maximum(vis_line, 1.0)
         support = _span(_prefix((Q > window[None]).astype(jnp.float32)), i_line, o_line) / jnp.maximum(

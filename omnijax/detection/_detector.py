@@ -66,11 +66,10 @@ def build_detector(rig: Rig, key: PRNGKeyArray | None = None, measure: str = "ch
     polar = build_polar_index(rig)
     axis = rig.detection.light_axis if measure == "chromaticity" else None
     dps = MEASURES[measure][1]
-    thresholds = build_thresholds(rig, polar, k_th, dps)
     return Detector(
-        omni=rig.omni, polar=polar, thresholds=thresholds,
+        omni=rig.omni, polar=polar, thresholds=build_thresholds(rig, polar, k_th, dps),
         foot_sigma=build_foot_sigma_table(polar, k_foot, rig.detection.foot_mc_profiles, dps,
-                                          rig.sigmas.H_p, thresholds.c_min),
+                                          rig.sigmas.H_p),
         sigma_H_p=jnp.asarray(rig.sigmas.H_p), max_people=rig.detection.max_people, measure=measure,
         light_axis=axis,
     )

@@ -11,9 +11,8 @@ Built once per rig (NumPy-free, but not traced: sizes come out of the geometry):
   person there (``window_lines``; the window sums the polar samples of those lines,
   :func:`omnijax.detection.window_sums`), and the samples in it (``window_n``);
 - foot hypotheses: for each inner end ``i`` of a person along a line, the index just
-  past its outer end (for the prior's height, and for each height of :data:`HEIGHT_SIGMAS`),
-  the image radius of its axis foot (what eq 1 turns into R_p), that floor radius R_p (m)
-  and the person's azimuth span there;
+  past its outer end, the image radius of its axis foot (what eq 1 turns into R_p), that
+  floor radius R_p (m) and the person's azimuth span there;
 - the rig's *ignore* zones (``[[zones]]``, :mod:`omnijax.config`): line samples inside them are
   left out like repeats (``line_ok``), so that nothing is detected there and a line's
   chi-square counts only the samples left.
@@ -35,11 +34,6 @@ from ..geometry import floor_radius, person_image_extent, point_image_radius
 #: Fewest pixels of radius the polar sampling needs (a person's profile along a line).
 MIN_POLAR_SPAN_PX = 8
 
-#: Person heights the foot estimate tries, in prior standard deviations from ``H_p`` (the world
-#: draws heights within 4): a quarter sigma apart, so that the outer end of the hardest case, a
-#: person at the room's far end (about 10 px of radius a sigma there), is within a pixel or so.
-HEIGHT_SIGMAS = np.arange(-3.0, 3.0001, 0.25)
-
 
 class PolarIndex(eqx.Module):
     """Precomputed sampling of the omni image; see the module docstring."""
@@ -57,9 +51,6 @@ class PolarIndex(eqx.Module):
     hyp_R: Float[Array, " R"]
     hyp_dout_dH: Float[Array, " R"]
     hyp_width: Float[Array, " R"]
-    #: index just past the outer end of a person of height ``H_p + z sigma_H_p`` (rows: ``height_z``)
-    hyp_out_h: Int[Array, "K R"]
-    height_z: Float[Array, " K"]
     image_size: tuple[int, int] = eqx.field(static=True)
     #: the widest psi2 window's half width (lines): how far a window sum reaches round the circle
     window_reach: int = eqx.field(static=True)
@@ -128,10 +119,9 @@ def _range_radii(rig: Rig, R_far):
 
 
 @jax.jit
-def _geometry_tables(rig: Rig, radii, theta, z, axis_factor=0.25 * math.pi):
-    """Pixels of the line samples; per radius: floor radius, and the outer end (for the prior's
-    height and for heights ``H_p + z sigma_H_p``) and axis-foot radius of a person whose inner
-    end, as the psi2 window sees it, is there, the axis ``axis_factor rho`` beyond it.
+def _geometry_tables(rig: Rig, radii, theta):
+    """Pixels of the line samples; per radius: floor radius, and the outer end and axis-foot
+    radius of a person whose inner end, as the psi2 window sees it, is there.
 
     The window spans the body's width across the line, so it sees the body's round base
     start, on average over its columns, ``pi rho / 4`` before the axis (the mean of
@@ -141,13 +131,12 @@ def _geometry_tables(rig: Rig, radii, theta, z, axis_factor=0.25 * math.pi):
     x, y = omni.to_pixel(radii[None, :], theta[:, None])
     R_floor = floor_radius(radii, omni.r_m, omni.H_o, omni.profile)[0]
     rho = body_radius(rig)
-    R_axis = R_floor + axis_factor * rho
+    R_axis = R_floor + 0.25 * jnp.pi * rho
     outer = lambda H_p: person_image_extent(R_axis, omni, H_p, rig.person.R_h, rho)[1]
     r_out, dout_dH = jax.jvp(outer, (rig.person.H_p,), (jnp.ones_like(rig.person.H_p),))
-    r_out_h = jax.vmap(outer)(rig.person.H_p + z * rig.sigmas.H_p)
     r_f = point_image_radius(R_axis, 0.0, omni.r_m, omni.H_o, omni.profile)
     width = 2 * jnp.arcsin(jnp.minimum(rho / R_axis, 1.0))  # a vertical cylinder's azimuth span
-    return x, y, R_floor, r_out, r_f, dout_dH, width, R_axis, r_out_h
+    return x, y, R_floor, r_out, r_f, dout_dH, width, R_axis
 
 
 def build_polar_index(rig: Rig) -> PolarIndex:
@@ -159,8 +148,8 @@ def build_polar_index(rig: Rig) -> PolarIndex:
     radii = r_min + np.arange(n_r, dtype=float)
     theta = 2 * np.pi * np.arange(det.n_theta) / det.n_theta
 
-    tables = _geometry_tables(rig, jnp.asarray(radii), jnp.asarray(theta), jnp.asarray(HEIGHT_SIGMAS))
-    x, y, R_floor, r_out, hyp_r_f, dout_dH, hyp_width, hyp_R, r_out_h = (np.asarray(v) for v in tables)
+    tables = _geometry_tables(rig, jnp.asarray(radii), jnp.asarray(theta))
+    x, y, R_floor, r_out, hyp_r_f, dout_dH, hyp_width, hyp_R = (np.asarray(v) for v in tables)
     xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
     inside = (xi >= 0) & (xi < W_img) & (yi >= 0) & (yi < H_img)
     flat = np.where(inside, yi * W_img + xi, 0)
@@ -177,8 +166,6 @@ def build_polar_index(rig: Rig) -> PolarIndex:
 
     hyp_out = np.ceil(r_out - r_min).astype(np.int64)
     hyp_ok = (hyp_out <= n_r) & (hyp_out > np.arange(n_r))
-    # another height's end: past the inner end, cut at the sampled radii (what lies beyond is not seen)
-    hyp_out_h = np.clip(np.ceil(r_out_h - r_min).astype(np.int64), np.arange(n_r) + 1, n_r)
     return PolarIndex(
         theta=jnp.asarray(theta), radii=jnp.asarray(radii),
         line_index=jnp.asarray(flat, dtype=jnp.int32), line_ok=jnp.asarray(line_ok),
@@ -186,7 +173,6 @@ def build_polar_index(rig: Rig) -> PolarIndex:
         window_lines=jnp.asarray(window_lines, dtype=jnp.int32), window_n=jnp.asarray(2.0 * window_lines + 1),
         hyp_out=jnp.asarray(np.minimum(hyp_out, n_r), dtype=jnp.int32), hyp_ok=jnp.asarray(hyp_ok),
         hyp_r_f=jnp.asarray(hyp_r_f), hyp_R=jnp.asarray(hyp_R), hyp_dout_dH=jnp.asarray(dout_dH),
-        hyp_width=jnp.asarray(hyp_width), hyp_out_h=jnp.asarray(hyp_out_h, dtype=jnp.int32),
-        height_z=jnp.asarray(HEIGHT_SIGMAS), image_size=(W_img, H_img), window_reach=int(window_lines.max()),
+        hyp_width=jnp.asarray(hyp_width), image_size=(W_img, H_img), window_reach=int(window_lines.max()),
         person_half_lines=float(0.5 * hyp_width[hyp_ok].max() * det.n_theta / (2 * np.pi)) if hyp_ok.any() else 0.0,
     )
