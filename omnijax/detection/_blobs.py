@@ -27,7 +27,8 @@ or one behind the other as the camera sees them, and the paper's estimate then f
      deviations taller than the prior), d^2 is set to the background's mean, so that no later
      step finds the same person again and the next person is sought in what is left.
 3. Two people's feet are at least a shoulder width apart; two detections whose feet are closer
-   than :data:`MERGE_M` on the floor are one person's fragments and the weaker goes
+   than :data:`MERGE_M` on the floor are one person's fragments and the weaker goes, and a run of
+   fewer than :data:`MIN_RUN_LINES` lines is a strip beside someone, not a person
    (:func:`merge_fragments`, the one place where detections are merged); so are two on the
    innermost foot hypothesis (someone under the camera, whose image fans over a wide angle)
    within the blind disc's diameter.
@@ -58,6 +59,12 @@ VALLEY = 0.6
 MARGIN_LINES, MARGIN_R, TALL_SIGMAS = 1, 3, 3.0
 #: Feet closer than this on the floor (m) are one person's (two people's are a shoulder width apart).
 MERGE_M = 0.45
+#: Fewest lines in a person's run: a body spans at least 5 lines (2 asin(rho / R) at the room's far
+#: end) and the psi2 window 13, so a run of one line is a strip beside someone (the edge of their
+#: shadow or of their body past the run that explained them), not a person. Measured on tuning seeds
+#: 6201-6203 (six scenes, 600 frames): runs of one line were 11 of 7,300 matched detections and 32
+#: of 270 false alarms (28 of them fragments); docs/detection.md, "A strip is not a person".
+MIN_RUN_LINES = 2
 #: Lines searched either side of a person's line for its run (the widest person near the axis).
 REACH = 64
 
@@ -260,12 +267,15 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
 
 
 def merge_fragments(valid: Bool[Array, " K"], floor_xy: Float[Array, "K 2"], innermost: Bool[Array, " K"] | None = None,
-                    inner_R=0.0) -> Bool[Array, " K"]:
-    """``valid`` less every detection whose foot lies within :data:`MERGE_M` of an earlier (stronger)
+                    inner_R=0.0, run_lines: Int[Array, " K"] | None = None) -> Bool[Array, " K"]:
+    """``valid`` less every detection whose run has fewer than :data:`MIN_RUN_LINES` lines (``run_lines``,
+    if given), and every one whose foot lies within :data:`MERGE_M` of an earlier (stronger)
     valid one's on the floor; or, both on the ``innermost`` foot hypothesis (the person reaches into
     the blind disc under the camera: the foot is somewhere inside the circle of floor radius
     ``inner_R``, and a person there spans a wide fan of lines that splits into fragments), within
     the disc's diameter."""
+    if run_lines is not None:
+        valid = valid & (run_lines >= MIN_RUN_LINES)
     d = jnp.linalg.norm(floor_xy[:, None] - floor_xy[None], axis=-1)
     idx = jnp.arange(valid.shape[0])
     near = d < MERGE_M

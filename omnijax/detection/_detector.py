@@ -241,7 +241,7 @@ def detections_of(detector: Detector, people: People) -> Detections:
     R = polar.hyp_R[i]
     first = polar.hyp_first
     valid = merge_fragments(people.valid, jnp.stack([R * jnp.cos(theta_f), R * jnp.sin(theta_f)], -1),
-                            i == first, polar.hyp_R[first])
+                            i == first, polar.hyp_R[first], people.last - people.first + 1)
     return Detections(
         valid=valid, r_f=polar.hyp_r_f[i], theta_f=theta_f, sigma_r_f=sigma_r, sigma_theta_f=sigma_theta,
         bound_r_f=bound_r, bound_theta_f=bound_theta,

@@ -247,6 +247,29 @@ def test_fragments_merge_by_floor_distance_and_under_the_camera():
     np.testing.assert_array_equal(np.asarray(merge_fragments(valid, xy, inner, 0.45)), [True, False, True, True])
 
 
+def test_a_strip_of_one_line_is_not_a_person(paper_detector):
+    """On a table of d^2: one line changed strongly over a person's radii (the edge of someone's
+    shadow, or of their body past their run) is found as a run of one line and dropped; the same
+    change over a body's width of lines is a person."""
+    from omnijax.detection._detector import find_sectors, locate_people
+
+    det = paper_detector
+    polar = det.polar
+    ok = np.asarray(polar.line_ok, np.float32)
+    i = int(np.argmin(np.abs(np.asarray(polar.hyp_R) - 2.0)))
+    radii = slice(i, int(polar.hyp_out[i]))
+
+    def found(lines):
+        d2 = 2.0 * ok
+        d2[lines, radii] = 400.0
+        d2 = jnp.asarray(d2 * ok)
+        return int(np.asarray(locate_people(det, d2, find_sectors(det, d2.sum(-1))).valid).sum())
+
+    assert found([100]) == 0
+    width = int(np.ceil(float(polar.hyp_width[i]) / (2 * np.pi / polar.n_theta)))
+    assert found(list(range(100, 100 + width))) == 1
+
+
 @pytest.mark.parametrize("layout", ["side by side", "one behind the other"])
 def test_two_people_in_one_sector_are_two_detections(paper_detector, painted, layout):
     """Two painted people in one psi1 sector (the paper's detector finds one foot there): side by side,
