@@ -30,6 +30,7 @@ from ._detector import (
     build_detector as build_detector,
     detect as detect,
     find_sectors as find_sectors,
+    life_candidates as life_candidates,
     line_background as line_background,
     line_change as line_change,
     lines_from as lines_from,

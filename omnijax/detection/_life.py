@@ -52,7 +52,16 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, UInt8
 
 from ._change import AGREE, Background, change_against, change_measure, learned
-from ._detector import Detections, Detector, LineBackground, change_at, find_sectors, lines_from, locate_people
+from ._detector import (
+    Detections,
+    Detector,
+    LineBackground,
+    change_at,
+    find_sectors,
+    life_candidates,
+    lines_from,
+    locate_people,
+)
 from ._indexing import gather_rgb
 
 #: d^2 of a changed sample: the chi-square(2) 1 - 1e-3 quantile (a background sample exceeds it once
@@ -205,7 +214,7 @@ def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets
     ok = polar.line_ok
     changed = (d2 > CHANGED) & ok
     ev = ghost_evidence(detector, cur, lines, d2, dets)
-    valid = dets.valid
+    valid = life_candidates(dets)
     sure_ghost, _ = verdicts(ev, jnp.ones_like(trusted), rates.edge)  # both signs, as for the trusted
     # a faint edge now and less before is no verdict: the vote waits (a standing person never seen
     # walking in, whose edge now flickered about the threshold, 3.5-50 against none before, used to be
@@ -283,7 +292,7 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
         d2 = jnp.where(ok, change_at(detector, composite, lines), 0.0)
         dets = locate_people(detector, d2, find_sectors(detector, d2.sum(-1)))
         ev = ghost_evidence(detector, composite, lines, d2, dets)
-        floor = dets.valid & verdicts(ev, jnp.ones_like(dets.valid), edge)[0]
+        floor = life_candidates(dets) & verdicts(ev, jnp.ones_like(dets.valid), edge)[0]
         take = regions(dets, floor, d2.shape) & has & (d2 > CHANGED)
         mean = jnp.where(take[..., None], minority, lines.mean)
         var_factor = jnp.where(take, 1.0 / jnp.maximum(minority_n, 1.0), lines.var_factor)
