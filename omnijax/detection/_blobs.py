@@ -52,7 +52,10 @@ SUPPORT = 0.25
 #: A person's run of lines is at most RUN_WIDTHS times its model width (a sector of one person).
 RUN_WIDTHS = 1.5
 #: The run stops where the angular profile has fallen below VALLEY of its value at the person's
-#: line and rises again (a valley between two people).
+#: line and rises again (a valley between two people), more than the model's half width from the
+#: person's line: two people side by side are a body's width apart, so a dip nearer than that is
+#: one person's own (a shadow beside them, their legs and head as a fan near the axis), and what
+#: lies there is explained with the person anyway (the model's width round the centre).
 VALLEY = 0.6
 #: Explained: the model's width plus MARGIN_LINES each side; radii from MARGIN_R before the foot
 #: to MARGIN_R past the top of a person TALL_SIGMAS prior standard deviations taller.
@@ -146,14 +149,16 @@ def _span(P, a, b):
 def person_lines(excess_line: Float[Array, " L"], hw) -> tuple[Array, Array]:
     """The run of lines of the person at offset 0 of ``excess_line`` (its d^2 excess per line over
     its radii, offsets ``-REACH .. REACH``): offsets ``(left, right)``, bounded by significance
-    (``excess_line > 0``), the valley rule and :data:`RUN_WIDTHS` x ``hw`` (the model's half width)."""
+    (``excess_line > 0``), the valley rule (beyond ``hw``) and :data:`RUN_WIDTHS` x ``hw`` (the model's
+    half width)."""
     peak = jnp.maximum(excess_line[REACH], 1e-6)
     limit = jnp.ceil(RUN_WIDTHS * hw).astype(jnp.int32) + 1
+    offset = jnp.arange(1, REACH + 1)
 
     def side(values):  # offsets 1 .. REACH going outward
         prev = jnp.concatenate([values[:1], values[:-1]])
         low = jax.lax.cummin(values) < VALLEY * peak
-        stop = (values <= 0) | (low & (values > prev)) | (jnp.arange(1, REACH + 1) > limit)
+        stop = (values <= 0) | (low & (values > prev) & (offset > hw)) | (offset > limit)
         return jnp.argmax(jnp.concatenate([stop, jnp.ones(1, bool)]))  # lines kept on this side
 
     right = side(excess_line[REACH + 1:])
