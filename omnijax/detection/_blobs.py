@@ -52,10 +52,11 @@ SUPPORT = 0.25
 #: A person's run of lines is at most RUN_WIDTHS times its model width (a sector of one person).
 RUN_WIDTHS = 1.5
 #: The run stops where the angular profile has fallen below VALLEY of its value at the person's
-#: line and rises again (a valley between two people), more than the model's half width from the
-#: person's line: two people side by side are a body's width apart, so a dip nearer than that is
-#: one person's own (a shadow beside them, their legs and head as a fan near the axis), and what
-#: lies there is explained with the person anyway (the model's width round the centre).
+#: line and rises again (a valley between two people): more than the model's half width from the
+#: person's line, or nearer where the line that rises has its own foot :data:`MERGE_M` or more from
+#: the person's on the floor (someone nearer or farther out). A dip nearer than a half width with
+#: the foot where the person's is, is the person's own (their two legs, near the axis); two people
+#: side by side are a body's width apart.
 VALLEY = 0.6
 #: Explained: the model's width plus MARGIN_LINES each side; radii from MARGIN_R before the foot
 #: to MARGIN_R past the top of a person TALL_SIGMAS prior standard deviations taller.
@@ -146,23 +147,25 @@ def _span(P, a, b):
     return jnp.take_along_axis(P, b[:, None], 1)[:, 0] - jnp.take_along_axis(P, a[:, None], 1)[:, 0]
 
 
-def person_lines(excess_line: Float[Array, " L"], hw) -> tuple[Array, Array]:
+def person_lines(excess_line: Float[Array, " L"], hw, apart: Bool[Array, " L"] | None = None) -> tuple[Array, Array]:
     """The run of lines of the person at offset 0 of ``excess_line`` (its d^2 excess per line over
     its radii, offsets ``-REACH .. REACH``): offsets ``(left, right)``, bounded by significance
-    (``excess_line > 0``), the valley rule (beyond ``hw``) and :data:`RUN_WIDTHS` x ``hw`` (the model's
-    half width)."""
+    (``excess_line > 0``), the valley rule and :data:`RUN_WIDTHS` x ``hw`` (the model's half width).
+    A valley parts two people beyond ``hw``, or nearer where ``apart`` (per offset: that line's own
+    foot is :data:`MERGE_M` or more from the person's on the floor; default nowhere)."""
     peak = jnp.maximum(excess_line[REACH], 1e-6)
     limit = jnp.ceil(RUN_WIDTHS * hw).astype(jnp.int32) + 1
     offset = jnp.arange(1, REACH + 1)
+    apart = jnp.zeros(2 * REACH + 1, bool) if apart is None else apart
 
-    def side(values):  # offsets 1 .. REACH going outward
+    def side(values, other):  # offsets 1 .. REACH going outward
         prev = jnp.concatenate([values[:1], values[:-1]])
         low = jax.lax.cummin(values) < VALLEY * peak
-        stop = (values <= 0) | (low & (values > prev) & (offset > hw)) | (offset > limit)
+        stop = (values <= 0) | (low & (values > prev) & ((offset > hw) | other)) | (offset > limit)
         return jnp.argmax(jnp.concatenate([stop, jnp.ones(1, bool)]))  # lines kept on this side
 
-    right = side(excess_line[REACH + 1:])
-    left = side(excess_line[:REACH][::-1])
+    right = side(excess_line[REACH + 1:], apart[REACH + 1:])
+    left = side(excess_line[:REACH][::-1], apart[:REACH][::-1])
     return -left, right
 
 
@@ -228,7 +231,10 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
         ring = (t0 + jnp.arange(-REACH, REACH + 1)) % T
         per_line = jnp.sum(jnp.where(rad[None], d2[ring] - dps * ok[ring], 0.0), 1)
         sig = per_line - 0.5 * c_min * jnp.sum(jnp.where(rad[None], ok[ring], 0.0), 1)
-        left, right = person_lines(sig, hw)
+        R0, R1 = polar.hyp_R[i0], polar.hyp_R[i_line[ring]]
+        gap = 2 * (1 - jnp.cos(step * jnp.arange(-REACH, REACH + 1)))  # |u0 - u1|^2 of unit vectors
+        apart = (R0 - R1) ** 2 + R0 * R1 * gap >= MERGE_M**2  # feet MERGE_M or more apart on the floor
+        left, right = person_lines(sig, hw, apart)
         first, last = t0 + left, t0 + right
         centre = 0.5 * (first + last)
         tc = jnp.floor(centre).astype(jnp.int32)  # unwrapped, as first and last (a run may cross line 0)
