@@ -131,7 +131,7 @@ def from_records(paths: list[Path]) -> dict[str, np.ndarray]:
     """Matched detections written by ``perception_sweep.py --records`` (its floor-gated matching):
     the same keys as :func:`matched`, ``isolated`` all true (the sweep's records do not say)."""
     rows = [r for p in paths for recs in json.loads(p.read_text()).values() for r in recs]
-    a = np.array([list(r) + [0.0] * (7 - len(r)) for r in rows], float).reshape(-1, 7)  # older records: no bounds
+    a = np.array([list(r[:7]) + [0.0] * (7 - len(r)) for r in rows], float).reshape(-1, 7)  # older records: no bounds
     return {"e_r": a[:, 1], "e_t": a[:, 2], "s_r": a[:, 3], "s_t": a[:, 4], "isolated": np.ones(len(a), bool),
             "R": a[:, 0], "b_r": a[:, 5], "b_t": a[:, 6]}
 

@@ -232,7 +232,9 @@ class PerceptionScore:
     miss_causes: Counter = field(default_factory=Counter)
     nees: list = field(default_factory=list)  # (R_m, nees_r, nees_theta)
     #: per matched detection: the true foot's floor radius (m), the errors of r_f (px) and theta_f (rad)
-    #: and the detector's own sigmas and bound parts (before the rule): what benchmarks/fit_detection_sigmas.py fits
+    #: and the detector's own sigmas and bound parts (before the rule): what benchmarks/fit_detection_sigmas.py
+    #: fits; then what may explain an error: the true r_f (px), the detection's contrast, run width (rad),
+    #: r_in and r_out (px), whether the person was moving, the person's height (m)
     records: list = field(default_factory=list)
 
     def add_frame(self, frame: int, truth: dict, people: list[dict], z: np.ndarray, sigmas: np.ndarray,
@@ -261,7 +263,10 @@ class PerceptionScore:
             p = people[r]
             self.records.append((R, float(e_r), e_t, float(p.get("detector_sigma_r_f", sigmas[r, 0])),
                                  float(p.get("detector_sigma_theta_f", sigmas[r, 1])),
-                                 float(p.get("detector_bound_r_f", 0.0)), float(p.get("detector_bound_theta_f", 0.0))))
+                                 float(p.get("detector_bound_r_f", 0.0)), float(p.get("detector_bound_theta_f", 0.0)),
+                                 float(q["r_f"]), float(p.get("contrast", 0.0)),
+                                 float(wrap_pi(p["theta_r"] - p["theta_l"])), float(p.get("r_in", 0.0)),
+                                 float(p.get("r_out", 0.0)), float(q.get("moving", False)), float(q["H_p_m"])))
         out = {"missed": [], "false": []}
         unmatched = [k for k in range(len(people)) if k not in person_of]
         for c, q in enumerate(persons):
