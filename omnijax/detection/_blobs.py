@@ -160,12 +160,9 @@ def person_lines(excess_line: Float[Array, " L"], hw, apart: Bool[Array, " L"] |
 
     def side(values, other):  # offsets 1 .. REACH going outward
         prev = jnp.concatenate([values[:1], values[:-1]])
-        rise = (jax.lax.cummin(values) < VALLEY * peak) & (values > prev)
-        j = jnp.argmax(rise)  # the first rise after the valley: another person, or the person's own
-        valley = rise[j] & ((offset[j] > hw) | other[j])
-        stop = (values <= 0) | (offset > limit)
-        kept = jnp.argmax(jnp.concatenate([stop, jnp.ones(1, bool)]))  # lines kept on this side
-        return jnp.where(valley, jnp.minimum(kept, j), kept)
+        low = jax.lax.cummin(values) < VALLEY * peak
+        stop = (values <= 0) | (low & (values > prev) & ((offset > hw) | other)) | (offset > limit)
+        return jnp.argmax(jnp.concatenate([stop, jnp.ones(1, bool)]))  # lines kept on this side
 
     right = side(excess_line[REACH + 1:], apart[REACH + 1:])
     left = side(excess_line[:REACH][::-1], apart[:REACH][::-1])

@@ -93,6 +93,10 @@ def test_validate_quick_writes_report_and_maps(tmp_path):
         for row in rep[name]:
             assert set(row) >= TABLE1_ROW and row["trials"] + row["missed"] == 8
             assert row["pred_var_tan_tilt"] > 0 and row["emp_var_tan_tilt"] >= 0
+    # one person standing in a plain room, background learnt empty: x_m = 0.01 promises about 0.6 misses in 64
+    # trials (seed 0, so the count is fixed, not drawn anew); a person's own dip in the angular profile (two legs
+    # near the axis) once split their run and left its centre off them: 3 of these 8 at P3 and 11 of 40 at P3 and P4
+    assert sum(row["missed"] for row in rep["table1"]) <= 1
     for row in rep["table1"]:  # the paper's own measure beside it, labelled
         assert row["paper_fixed_position"]["trials"] <= 8 and row["paper_fixed_position"]["emp_var_sin_pan"] >= 0
     assert set(rep["pointing"]) >= {"nees_mean", "nees_over_5_99", "frames"} and rep["pointing"]["frames"] > 0
