@@ -95,7 +95,7 @@ def test_validate_quick_writes_report_and_maps(tmp_path):
             assert row["pred_var_tan_tilt"] > 0 and row["emp_var_tan_tilt"] >= 0
     # one person standing in a plain room, background learnt empty: x_m = 0.01 promises about 0.6 misses in 64
     # trials (seed 0, so the count is fixed, not drawn anew); a person's own dip in the angular profile (two legs
-    # near the axis) once split their run and left its centre off them: 3 of these 8 at P3 and 11 of 40 at P3 and P4
+    # near the axis) once split their run and left its centre off them: 2 of these 64 (11 of 40 at P3 and P4 in full)
     assert sum(row["missed"] for row in rep["table1"]) <= 1
     for row in rep["table1"]:  # the paper's own measure beside it, labelled
         assert row["paper_fixed_position"]["trials"] <= 8 and row["paper_fixed_position"]["emp_var_sin_pan"] >= 0
