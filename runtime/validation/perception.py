@@ -266,7 +266,8 @@ class PerceptionScore:
                                  float(p.get("detector_bound_r_f", 0.0)), float(p.get("detector_bound_theta_f", 0.0)),
                                  float(q["r_f"]), float(p.get("contrast", 0.0)),
                                  float(wrap_pi(p["theta_r"] - p["theta_l"])), float(p.get("r_in", 0.0)),
-                                 float(p.get("r_out", 0.0)), float(q.get("moving", False)), float(q["H_p_m"])))
+                                 float(p.get("r_out", 0.0)), float(q.get("moving", False)),
+                                 float(q.get("H_p_m", math.nan))))
         out = {"missed": [], "false": []}
         unmatched = [k for k in range(len(people)) if k not in person_of]
         for c, q in enumerate(persons):
