@@ -147,16 +147,15 @@ def _span(P, a, b):
     return jnp.take_along_axis(P, b[:, None], 1)[:, 0] - jnp.take_along_axis(P, a[:, None], 1)[:, 0]
 
 
-def person_lines(excess_line: Float[Array, " L"], hw, apart: Bool[Array, " L"] | None = None) -> tuple[Array, Array]:
+def person_lines(excess_line: Float[Array, " L"], hw, apart: Bool[Array, " L"]) -> tuple[Array, Array]:
     """The run of lines of the person at offset 0 of ``excess_line`` (its d^2 excess per line over
     its radii, offsets ``-REACH .. REACH``): offsets ``(left, right)``, bounded by significance
     (``excess_line > 0``), the valley rule and :data:`RUN_WIDTHS` x ``hw`` (the model's half width).
     A valley parts two people beyond ``hw``, or nearer where ``apart`` (per offset: that line's own
-    foot is :data:`MERGE_M` or more from the person's on the floor; default nowhere)."""
+    foot is :data:`MERGE_M` or more from the person's on the floor)."""
     peak = jnp.maximum(excess_line[REACH], 1e-6)
     limit = jnp.ceil(RUN_WIDTHS * hw).astype(jnp.int32) + 1
     offset = jnp.arange(1, REACH + 1)
-    apart = jnp.zeros(2 * REACH + 1, bool) if apart is None else apart
 
     def side(values, other):  # offsets 1 .. REACH going outward
         prev = jnp.concatenate([values[:1], values[:-1]])
