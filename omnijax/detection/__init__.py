@@ -5,6 +5,7 @@ from ._blobs import (
     People as People,
     find_people as find_people,
     merge_fragments as merge_fragments,
+    window_count_prefix as window_count_prefix,
     window_sums as window_sums,
 )
 from ._change import (

@@ -36,6 +36,7 @@ or one behind the other as the camera sees them, and the paper's estimate then f
 
 from __future__ import annotations
 
+import functools
 import math
 
 import equinox as eqx
@@ -71,6 +72,10 @@ MERGE_M = 0.45
 MIN_RUN_LINES = 2
 #: Lines searched either side of a person's line for its run (the widest person near the axis).
 REACH = 64
+#: A pass after a person whose explained lines number at most NARROW_LINES recomputes a band that
+#: much wider than a window's reach either side (a person beyond the first metre or so); a wider one
+#: the band of :func:`_band_lines` (the widest person, under the camera). Speed only: the same figures.
+NARROW_LINES = 32
 
 
 class People(eqx.Module):
@@ -115,6 +120,14 @@ def window_sums(x: Float[Array, "T R"], half: Int[Array, " R"], reach: int = 0) 
     T = x.shape[0]
     H = _wrap(T, reach)
     return _windows(jnp.concatenate([x[T - H:], x, x[:H]], 0), half, H, T)
+
+
+@functools.partial(jax.jit, static_argnums=2)
+def window_count_prefix(line_ok: Bool[Array, "T R"], half: Int[Array, " R"], reach: int) -> Float[Array, "T R1"]:
+    """Per line, the samples that count (``line_ok``) in its psi2 window (:func:`window_sums`) at each
+    radius, summed along the radii with a leading 0 (float32, exact: whole numbers); a constant of the
+    rig, kept in :class:`~omnijax.detection.PolarIndex` (``window_ok_prefix``)."""
+    return _prefix(window_sums(line_ok.astype(jnp.float32), half, reach))
 
 
 def _wrap(T: int, reach: int) -> int:
@@ -187,8 +200,9 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
 
     Each line's figures (its best foot, excess, contrast, support) depend on the samples within a
     window's reach of it, so after a person is explained only the lines round what it explained
-    change: the first pass computes every line, each later one a band of :func:`_band_lines` lines
-    (the same figures, to float rounding: the sums start elsewhere)."""
+    change: the first pass computes every line, each later one a band of lines round what the last
+    person explained (:data:`NARROW_LINES` past a window's reach either side, or :func:`_band_lines`
+    for a person too wide for that): the same figures, to float rounding (the sums start elsewhere)."""
     T, R = d2.shape
     step = 2 * jnp.pi / T
     half = polar.window_lines
@@ -196,12 +210,12 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     r_idx = jnp.arange(R)
     line_idx = jnp.arange(T)
     reach = _wrap(T, polar.window_reach)
-    n_all = _prefix(window_sums(ok, half, reach))
+    n_all = polar.window_ok_prefix.astype(d2.dtype)
     dps = dof_per_sample
 
     def figures(d2, explained, start, B):
         """Lines ``start .. start + B - 1`` (mod T) and their figures: best foot, samples, unexplained
-        samples, excess, contrast, support."""
+        samples, excess, contrast, support (``explained`` None: nothing is, the first pass)."""
         rows = (start - reach + jnp.arange(B + 2 * reach)) % T
         lines = rows[reach:reach + B]
         Q = _windows(d2[rows], half, reach, B)
@@ -209,8 +223,12 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
         eq12 = jnp.where(polar.hyp_ok[None], 2 * (PQ[:, out] - PQ[:, :-1]) - PQ[:, -1:], -jnp.inf)
         i_line = argmax_rows(eq12)
         o_line = out[i_line]
-        n_line = jnp.maximum(_span(n_all[lines], i_line, o_line), 1.0)
-        vis_line = _span(_prefix(_windows((ok * (1.0 - explained))[rows], half, reach, B)), i_line, o_line)
+        n_span = _span(n_all[lines], i_line, o_line)
+        n_line = jnp.maximum(n_span, 1.0)
+        if explained is None:  # every sample unexplained: the window's samples that count (whole numbers)
+            vis_line = n_span
+        else:
+            vis_line = _span(_prefix(_windows((ok * (1.0 - explained))[rows], half, reach, B)), i_line, o_line)
         excess = _span(PQ, i_line, o_line) - dps * n_line  # explained samples hold exactly dps
         contrast = excess / jnp.maximum(vis_line, 1.0)
         support = _span(_prefix((Q > window[None]).astype(jnp.float32)), i_line, o_line) / jnp.maximum(
@@ -257,18 +275,24 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     # is explained, so their table is the same), and their slots stay empty; after the first pass only
     # the band of lines round what the last person explained is computed again
     B = _band_lines(polar)
+    B_narrow = min(B, 2 * reach + NARROW_LINES)
+
+    def refresh(B, d2, explained, fig, e_first):
+        lines, band = figures(d2, explained, e_first - reach, B)
+        return jax.tree.map(lambda a, v: a.at[lines].set(v), fig, band)
 
     def body(state):
         k, d2, explained, fig, people, _ = state
-        e_first = people["explained"][k - 1, 0]
-        lines, band = figures(d2, explained, e_first - reach, B)
-        fig = jax.tree.map(lambda a, v: a.at[lines].set(v), fig, band)
+        e_first, e_last = people["explained"][k - 1, 0], people["explained"][k - 1, 1]
+        narrow = e_last - e_first + 1 + 2 * reach <= B_narrow  # most people: the widest band is for the axis
+        fig = jax.lax.cond(narrow, functools.partial(refresh, B_narrow), functools.partial(refresh, B),
+                           d2, explained, fig, e_first)
         d2, explained, rec = pick(d2, explained, fig)
         people = jax.tree.map(lambda a, v: a.at[k].set(v), people, rec)
         return k + 1, d2, explained, fig, people, rec["valid"]
 
     explained = jnp.zeros(d2.shape, bool)
-    _, fig = figures(d2, explained, 0, T)
+    _, fig = figures(d2, None, 0, T)
     d2, explained, rec = pick(d2, explained, fig)
     people = jax.tree.map(lambda v: jnp.zeros((max_people, *v.shape), v.dtype).at[0].set(v), rec)
     state = (jnp.asarray(1), d2, explained, fig, people, rec["valid"])

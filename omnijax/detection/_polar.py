@@ -51,6 +51,10 @@ class PolarIndex(eqx.Module):
     hyp_R: Float[Array, " R"]
     hyp_dout_dH: Float[Array, " R"]
     hyp_width: Float[Array, " R"]
+    #: per line, the samples that count (``line_ok``) in its psi2 window at each radius, summed along the
+    #: radii with a leading 0 (:func:`~omnijax.detection.window_count_prefix`): a foot hypothesis's
+    #: window holds the span between its ends. A constant of the rig (0.2 ms a frame when computed there)
+    window_ok_prefix: Float[Array, "T R1"]
     image_size: tuple[int, int] = eqx.field(static=True)
     #: the widest psi2 window's half width (lines): how far a window sum reaches round the circle
     window_reach: int = eqx.field(static=True)
@@ -166,11 +170,15 @@ def build_polar_index(rig: Rig) -> PolarIndex:
 
     hyp_out = np.ceil(r_out - r_min).astype(np.int64)
     hyp_ok = (hyp_out <= n_r) & (hyp_out > np.arange(n_r))
+    from ._blobs import window_count_prefix  # the psi2 window's one definition
+
+    window_lines_j = jnp.asarray(window_lines, dtype=jnp.int32)
     return PolarIndex(
         theta=jnp.asarray(theta), radii=jnp.asarray(radii),
         line_index=jnp.asarray(flat, dtype=jnp.int32), line_ok=jnp.asarray(line_ok),
         samples=jnp.asarray(line_ok.sum(1), dtype=float),
-        window_lines=jnp.asarray(window_lines, dtype=jnp.int32), window_n=jnp.asarray(2.0 * window_lines + 1),
+        window_lines=window_lines_j, window_n=jnp.asarray(2.0 * window_lines + 1),
+        window_ok_prefix=window_count_prefix(jnp.asarray(line_ok), window_lines_j, int(window_lines.max())),
         hyp_out=jnp.asarray(np.minimum(hyp_out, n_r), dtype=jnp.int32), hyp_ok=jnp.asarray(hyp_ok),
         hyp_r_f=jnp.asarray(hyp_r_f), hyp_R=jnp.asarray(hyp_R), hyp_dout_dH=jnp.asarray(dout_dH),
         hyp_width=jnp.asarray(hyp_width), image_size=(W_img, H_img), window_reach=int(window_lines.max()),

@@ -443,8 +443,9 @@ def test_window_sums_wrap_round_the_circle(reach):
 
 def test_later_passes_recompute_only_a_band_of_lines(paper_detector, monkeypatch):
     """find_people recomputes, after its first pass, only the lines round what the last person explained
-    (``_band_lines``): the same people as recomputing every line (the band made the whole circle), on a
-    d^2 table of eight blobs of random widths, radii and strengths, one across line 0 (fixed seed)."""
+    (``NARROW_LINES`` past a window's reach, or ``_band_lines`` for a wider person): the same people as
+    recomputing every line (both bands made the whole circle), on a d^2 table of eight blobs of random
+    widths, radii and strengths, one across line 0 (fixed seed); both bands are taken."""
     from omnijax.detection import _blobs
 
     det = paper_detector
@@ -456,15 +457,21 @@ def test_later_passes_recompute_only_a_band_of_lines(paper_detector, monkeypatch
     for centre in (0, 40, 75, 130, 170, 215, 260, 320):
         i = int(np.argmin(np.abs(R - rng.uniform(0.8, 3.0))))
         half = int(rng.integers(3, 10))
+        if centre == 130:  # one wide person near the axis: its pass takes the wide band
+            i, half = int(np.argmin(np.abs(R - 0.7))), 16
         lines = np.arange(centre - half, centre + half + 1) % polar.n_theta
         d2[np.ix_(lines, np.arange(i, int(polar.hyp_out[i])))] += rng.uniform(20, 200)
     args = (polar, jnp.asarray(d2 * ok), jnp.asarray(ok), jnp.ones(polar.n_theta, bool), th.window, th.c_min,
             det.dof_per_sample, det.sigma_H_p, det.max_people)
     band = _blobs.find_people(*args)
     assert _blobs._band_lines(polar) < polar.n_theta
+    narrow = _blobs.NARROW_LINES
     monkeypatch.setattr(_blobs, "_band_lines", lambda polar: polar.n_theta)
+    monkeypatch.setattr(_blobs, "NARROW_LINES", polar.n_theta)
     full = _blobs.find_people(*args)
     assert int(np.asarray(band.valid).sum()) >= 6
+    spans = (np.asarray(band.explained[:, 1] - band.explained[:, 0]) + 1)[np.asarray(band.valid)]
+    assert (spans <= narrow).any() and (spans > narrow).any(), spans
     for f in ("valid", "i", "first", "last", "explained"):
         np.testing.assert_array_equal(np.asarray(getattr(band, f)), np.asarray(getattr(full, f)))
     np.testing.assert_allclose(np.asarray(band.excess), np.asarray(full.excess), rtol=1e-4)
