@@ -127,19 +127,24 @@ def _geometry_tables(rig: Rig, radii, theta):
     """Pixels of the line samples; per radius: floor radius, and the outer end and axis-foot
     radius of a person whose inner end, as the psi2 window sees it, is there.
 
-    The window spans the body's width across the line, so it sees the body's round base
-    start, on average over its columns, ``pi rho / 4`` before the axis (the mean of
-    ``sqrt(rho^2 - y^2)`` over ``|y| < rho``), not ``rho``.
+    Two distances from the inner end to the axis. The person's image as the window sees it (its
+    outer end, its azimuth span) is that of a body whose round base starts, on average over the
+    window's columns, ``pi rho / 4`` before the axis (the mean of ``sqrt(rho^2 - y^2)`` over
+    ``|y| < rho``). The foot reported is ``rho`` beyond the inner end: eq 12 finds the inner end
+    where the centre line meets the body, the near side of its base (``benchmarks/table1_bias.py``:
+    with ``pi rho / 4`` there every foot of Table 1 fell 1-2 px short; docs/detection.md, "The foot
+    is rho beyond the inner end").
     """
     omni = rig.omni
     x, y = omni.to_pixel(radii[None, :], theta[:, None])
     R_floor = floor_radius(radii, omni.r_m, omni.H_o, omni.profile)[0]
     rho = body_radius(rig)
-    R_axis = R_floor + 0.25 * jnp.pi * rho
-    outer = lambda H_p: person_image_extent(R_axis, omni, H_p, rig.person.R_h, rho)[1]
+    R_seen = R_floor + 0.25 * jnp.pi * rho
+    outer = lambda H_p: person_image_extent(R_seen, omni, H_p, rig.person.R_h, rho)[1]
     r_out, dout_dH = jax.jvp(outer, (rig.person.H_p,), (jnp.ones_like(rig.person.H_p),))
+    width = 2 * jnp.arcsin(jnp.minimum(rho / R_seen, 1.0))  # a vertical cylinder's azimuth span
+    R_axis = R_floor + rho
     r_f = point_image_radius(R_axis, 0.0, omni.r_m, omni.H_o, omni.profile)
-    width = 2 * jnp.arcsin(jnp.minimum(rho / R_axis, 1.0))  # a vertical cylinder's azimuth span
     return x, y, R_floor, r_out, r_f, dout_dH, width, R_axis
 
 
