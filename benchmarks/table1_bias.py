@@ -9,9 +9,9 @@ variant, the person jittered around the position (:func:`runtime.validation.endt
 - ``no_shadow``  no lamps, only ambient light (the same grey level): no cast shadows;
 - ``exact``      ``prior_size`` without jitter, the person at the nominal position (validate's old trials);
 - ``axis_model`` ``table1`` with the detector's foot hypotheses changed (monkeypatched here, not in
-                 omnijax): the axis foot ``rho`` (the body's radius) beyond the silhouette's inner end on
-                 the centre line, not ``pi rho / 4``: what the person model's fix in
-                 ``omnijax/detection/_polar.py`` would give;
+                 omnijax): the window's model of the image (outer end, width) too from an axis ``rho``
+                 beyond the inner end, not ``pi rho / 4`` (the detector has ``rho`` for the foot only:
+                 docs/detection.md, "The foot is rho beyond the inner end");
 - ``axis_prior_size`` ``axis_model`` with the person's H_p and R_h at the prior means (what is left once
                  the height is no longer a mismatch: the detector's height hypothesis).
 
@@ -47,8 +47,8 @@ VARIANTS = ("table1", "prior_size", "no_shadow", "exact", "axis_model", "axis_pr
 
 @jax.jit
 def _axis_tables(rig, radii, theta):
-    """``omnijax.detection._polar._geometry_tables`` with the axis ``rho`` beyond the inner end, not
-    ``pi rho / 4``: the ``axis_model`` variant."""
+    """``omnijax.detection._polar._geometry_tables`` with the window's model of the image too from the
+    axis ``rho`` beyond the inner end, not ``pi rho / 4``: the ``axis_model`` variant."""
     omni = rig.omni
     x, y = omni.to_pixel(radii[None, :], theta[:, None])
     R_floor = floor_radius(radii, omni.r_m, omni.H_o, omni.profile)[0]
