@@ -238,10 +238,10 @@ class RealTimeLoop:
 
     def _control(self, image, t: float):
         """The compiled per-frame call on ``image`` at time ``t`` with the tracker's current slots."""
-        slew = jax.tree.map(lambda *a: jnp.stack(a), *[link.slew() for link in self.links])
+        slew = jax.tree.map(lambda *a: np.stack(a), *[link.slew() for link in self.links])
         tr = self.tracker
         return control_step(self.detector, self.rig, image, self.keeper.lines, tr.slots(self.n_slots),
-                            jnp.asarray(t, float), tr.accel_sd, tr.nearest_gate_m, slew, mode=tr.mode,
+                            np.asarray(t, float), tr.accel_sd, tr.nearest_gate_m, slew, mode=tr.mode,
                             confirm=tr.confirm)
 
     def warm_up(self):
@@ -332,7 +332,7 @@ class RealTimeLoop:
         slots = list(tracker.tracks)
         x = jnp.asarray(frame.image)
         out = self._control(x, frame.stamp)
-        c = jax.device_get(out)
+        c = _to_host(out)
         t = self._record("control", t)
         valid = np.asarray(c.dets.valid)
         compact = np.cumsum(valid) - 1  # index among the valid detections
@@ -618,6 +618,13 @@ class RealTimeLoop:
                        "trust": dataclasses.asdict(self.selector.trust),
                        "inputs": list(INPUT_NAMES), "ptz_count": len(self.links)},
         }
+
+
+def _to_host(tree):
+    """``tree``'s arrays as NumPy arrays once computed: on the CPU each a view of its buffer, where
+    :func:`jax.device_get` first starts a copy of every leaf (about 0.3 ms a frame for the control
+    call's 48)."""
+    return jax.tree.map(np.asarray, tree)
 
 
 def _entry(aims: Aim, k: int, j: int) -> Aim:

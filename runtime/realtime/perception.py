@@ -139,8 +139,7 @@ class BackgroundKeeper:
         """Dispatch one frame of the life for the frame ``image`` whose detections ``dets`` (device
         arrays) were found with change ``d2`` against :attr:`lines`; ``trusted`` per slot."""
         self._collect()
-        self.life, ev, ghostly = live_step(self.detector, self.life, image, dets, d2, jnp.asarray(trusted),
-                                           self.rates)
+        self.life, ev, ghostly = live_step(self.detector, self.life, image, dets, d2, trusted, self.rates)
         self._pending = (ghostly, trusted)
         self.counts.frames += 1
 

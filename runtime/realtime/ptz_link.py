@@ -12,7 +12,7 @@ from __future__ import annotations
 import time
 
 import jax
-import jax.numpy as jnp
+import numpy as np
 
 from runtime.realtime.control import Slew, pan_tilt_slew_s
 
@@ -39,12 +39,13 @@ class PtzLink:
         self._pending: dict[int, tuple[float, float]] = {}
 
     def slew(self) -> Slew:
-        """What the control call's head prediction needs of this PTZ (scalars; the loop stacks them)."""
+        """What the control call's head prediction needs of this PTZ (NumPy scalars, the loop stacks them:
+        no JAX operation runs on the control thread outside its compiled call)."""
         sent, profile = self.sent, self.profile
-        return Slew(known=jnp.asarray(sent is not None and profile is not None),
-                    pan=jnp.asarray(sent[0] if sent else 0.0), tilt=jnp.asarray(sent[1] if sent else 0.0),
-                    pan_deg_s=jnp.asarray(self.rates[0]), tilt_deg_s=jnp.asarray(self.rates[1]),
-                    latency_s=jnp.asarray(profile.link.command_latency_s if profile is not None else 0.0))
+        return Slew(known=np.asarray(sent is not None and profile is not None),
+                    pan=np.asarray(sent[0] if sent else 0.0), tilt=np.asarray(sent[1] if sent else 0.0),
+                    pan_deg_s=np.asarray(self.rates[0]), tilt_deg_s=np.asarray(self.rates[1]),
+                    latency_s=np.asarray(profile.link.command_latency_s if profile is not None else 0.0))
 
     def warm_up(self) -> None:
         """Compile the slew-time estimate."""
