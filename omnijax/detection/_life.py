@@ -201,13 +201,24 @@ class LifeRates(eqx.Module):
     learn_frames: Float[Array, ""]
 
 
+class Renewal(eqx.Module):
+    """What one frame of the life does at each polar sample: ``cur`` the frame's colour there, ``fix``
+    whether it is re-learnt from the frame (a ghost repaired, or absorbed), ``free`` whether it was
+    seen unoccupied, ``rate`` its drift rate (0 unless free), ``still`` and ``ghost`` its counts after
+    the frame (before a fix resets them)."""
+
+    cur: Float[Array, "T R 3"]
+    fix: Bool[Array, "T R"]
+    free: Bool[Array, "T R"]
+    rate: Float[Array, "T R"]
+    still: Float[Array, "T R"]
+    ghost: Float[Array, "T R"]
+
+
 @jax.jit
-def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: Detections,
-              d2: Float[Array, "T R"], trusted: Bool[Array, " K"], rates: LifeRates) -> tuple[Life, Evidence, Array]:
-    """One frame of the background's life (see the module docstring) after ``dets`` were detected in
-    ``frame`` against ``life.lines`` with change ``d2``; ``trusted`` marks the detections the caller
-    knows to be people who walked in. Returns the new life, each detection's evidence, and which
-    detections were judged ghosts."""
+def _judge(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: Detections,
+           d2: Float[Array, "T R"], trusted: Bool[Array, " K"], rates: LifeRates) -> tuple[Renewal, Evidence, Array]:
+    """:func:`live_step`'s first half: the detections' evidence and verdicts, and what each sample does."""
     polar = detector.polar
     lines = life.lines
     cur = gather_rgb(jnp.asarray(frame), polar.line_index).astype(jnp.float32)
@@ -253,12 +264,32 @@ def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets
         relit = change_against(cur, lines.ref, lines.sigma) > CHANGED
         drift = jnp.where(relit, jnp.maximum(drift, RELIGHT_RATE), drift)
     a = jnp.where(free, jnp.where(learning, jnp.maximum(drift, 1.0 / (life.seen + 1.0)), drift), 0.0)
+    return Renewal(cur=cur, fix=fix, free=free, rate=a, still=still, ghost=ghost), ev, ghostly
+
+
+@jax.jit
+def _renew(life: Life, renewal: Renewal, rates: LifeRates) -> Life:
+    """:func:`live_step`'s second half: the life after the frame, each sample as ``renewal`` says."""
+    lines, cur, fix, a = life.lines, renewal.cur, renewal.fix, renewal.rate
     mean = jnp.where(fix[..., None], cur, lines.mean + a[..., None] * (cur - lines.mean))
     var_factor = jnp.where(fix, 1.0, (1 - a) ** 2 * lines.var_factor + a * a)
-    seen = jnp.where(fix, 1.0, jnp.minimum(life.seen + free, rates.learn_frames))
-    new = Life(lines=lines_from(mean, var_factor, lines.sigma), seen=seen, prev=cur,
-               still=jnp.where(fix, 0.0, still), ghost=jnp.where(fix, 0.0, ghost))
-    return new, ev, ghostly
+    seen = jnp.where(fix, 1.0, jnp.minimum(life.seen + renewal.free, rates.learn_frames))
+    return Life(lines=lines_from(mean, var_factor, lines.sigma), seen=seen, prev=cur,
+                still=jnp.where(fix, 0.0, renewal.still), ghost=jnp.where(fix, 0.0, renewal.ghost))
+
+
+def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: Detections,
+              d2: Float[Array, "T R"], trusted: Bool[Array, " K"], rates: LifeRates) -> tuple[Life, Evidence, Array]:
+    """One frame of the background's life (see the module docstring) after ``dets`` were detected in
+    ``frame`` against ``life.lines`` with change ``d2``; ``trusted`` marks the detections the caller
+    knows to be people who walked in. Returns the new life, each detection's evidence, and which
+    detections were judged ghosts.
+
+    Two compiled calls, what each sample does (:func:`_judge`) then the new life (:func:`_renew`): in
+    one, XLA's CPU fusion recomputes every sample's decisions inside the loop of each array of the life
+    it writes, three times over in the colour's (1.7 ms a frame on one core against 1.0 ms)."""
+    renewal, ev, ghostly = _judge(detector, life, frame, dets, d2, trusted, rates)
+    return _renew(life, renewal, rates), ev, ghostly
 
 
 #: Fewest learning frames a minority colour must hold to be taken for the floor (a tenth of 30).
