@@ -4,8 +4,8 @@ life"; docs/detection.md, "The background's life").
 
 The paper learns a background once; a system that runs for hours must keep it right. Once, before
 the first frame, :func:`settle_learning` takes the learning's minority where the majority was someone
-who stood through most of it (the floor they hid continues the floor around it). Then one jitted
-call per frame (:func:`live_step`), after detection, with the frame's d^2 (the detector's trace):
+who stood through most of it (the floor they hid continues the floor around it). Then once per
+frame (:func:`live_step`, two jitted calls), after detection, with the frame's d^2 (the detector's trace):
 
 1. **Ghost evidence** of each detection (:func:`ghost_evidence`): is there an object's edge in the
    *current* image at the sides of the person's run of lines? At each radius of the person where
