@@ -170,7 +170,7 @@ class Detection(eqx.Module):
     still_s: float = eqx.field(static=True, default=0.3)
     ghost_s: float = eqx.field(static=True, default=0.4)
     ghost_edge: float = eqx.field(static=True, default=6.0)
-    absorb_s: float = eqx.field(static=True, default=60.0)
+    absorb_s: float = eqx.field(static=True, default=90.0)
     off_floor_m: Float[Array, ""] = eqx.field(default=0.5, converter=jnp.asarray)
     light_axis: tuple[float, float, float] | None = eqx.field(static=True, default=None)
 
@@ -525,7 +525,7 @@ class DetectionSection(Section):
                                         why="an edge so strong no object has it")] = Field(
         6.0, description="object-edge test: mean least d^2 across a person's edge below this is no edge")
     absorb_s: Annotated[float, within(0.0, 86400.0, "seconds", open_low=True, why="a day")] = Field(
-        60.0, description="what stays changed and still this long, outside every trusted person, is "
+        90.0, description="what stays changed and at rest this long, outside every trusted person, is "
                           "learnt as background, s")
     foot_mc_profiles: Annotated[int, Field(ge=16, le=4096)] = Field(
         256, description="Monte Carlo profiles per table cell of sigma_r_f")

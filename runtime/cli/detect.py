@@ -15,8 +15,8 @@ detector on every later frame: chromaticity and d^2 (eq 5-7), radial sums and
 hysteresis sectors (eq 8-10), the windowed profile at every line of them and the
 people it holds one at a time with the Bayes foot estimate (eq 11-12), and the
 tracker; the background keeps itself right (the background's life: ghosts of people
-who left re-learnt, what stays still outside every person absorbed after [detection]
-absorb_s, a person who stops kept, the rest drifting; docs/detection.md). This is the
+who left re-learnt, what stays at rest outside every trusted person absorbed after [detection]
+absorb_s (90 s), a person who stops kept, the rest drifting; docs/detection.md). This is the
 same pipeline `run` and `demo` use.
 
 Writes DIR/detections.jsonl (one line per frame: each person's r_f, theta_f, their

@@ -23,7 +23,7 @@ bytes) and log.jsonl wait_ms, age_ms per frame show it. The
 background is learnt from frames spread over the first seconds (--background-frames over
 --background-seconds: people standing through less than half of them are not learnt) and
 keeps itself right while running (ghosts of people who left are re-learnt, what stays
-still outside every person is absorbed after [detection] absorb_s, a person who stops
+at rest outside every trusted person is absorbed after [detection] absorb_s (90 s), a person who stops
 stays); then, per frame: detection (jitted),
 tracking (Kalman with optimal assignment, or the paper's nearest neighbour), the
 target (round-robin with a dwell time, people whose face was not yet captured

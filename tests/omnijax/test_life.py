@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from omnijax import detect, learn_background, line_background
-from omnijax.detection import LifeRates, learned, live_step, start_life, verdicts
+from omnijax.detection import CHANGED, LifeRates, learned, live_step, start_life, verdicts
 from tests.omnijax.test_detection import _noisy, _paint_person
 
 #: Frames in these tests: a changed sample must stay still STILL frames and lie in a ghost GHOST frames
@@ -113,6 +113,31 @@ def test_a_trusted_person_who_stops_stays_and_an_untrusted_object_is_absorbed(pa
     _, absorbed, _ = _run(paper_detector, start_life(line_background(paper_detector, bg)), frames, False, _rates())
     seen = [int(v.sum()) for v, _ in absorbed]
     assert seen[:ABSORB - 1] == [1] * (ABSORB - 1) and seen[-3:] == [0, 0, 0]
+
+
+def test_the_count_at_rest_holds_while_something_passes(paper_detector, room):
+    """An object that stays, crossed for 3 frames by something of another colour (the painted person
+    with its channels swapped) after 10 frames and before 10 more: "still" restarts, the count at rest
+    (the absorption's) holds, at the object's samples changed far beyond doubt (d^2 over 10 x CHANGED,
+    857 samples); at the background's samples neither counts."""
+    rng, base, person, _ = room
+    bg = learn_background(np.stack([_noisy(rng, base) for _ in range(20)]))
+    never = jnp.asarray(1e9)
+    rates = LifeRates(adapt_rate=jnp.asarray(0.05), edge=jnp.asarray(6.0), still_frames=never, ghost_frames=never,
+                      absorb_frames=never, learn_frames=jnp.asarray(30.0))
+    life0 = start_life(line_background(paper_detector, bg))
+    passer = np.where(np.any(person != base, -1, keepdims=True), person[..., ::-1], base)
+    frames = ([_noisy(rng, person) for _ in range(10)] + [_noisy(rng, passer) for _ in range(3)]
+              + [_noisy(rng, person) for _ in range(10)])
+    life, _, _ = _run(paper_detector, life0, frames, False, rates)
+    _, trace = detect(paper_detector, jnp.asarray(frames[-1]), life0.lines)
+    sure = np.asarray(trace.d2) > 10 * CHANGED
+    still, rest = np.asarray(life.still), np.asarray(life.rest)
+    assert sure.sum() > 300
+    # the first frame and the passer's first and last moved: at most 23 - 3 frames at rest, 9 still
+    assert np.median(rest[sure]) >= 19 and np.max(still[sure]) <= 9, (np.median(rest[sure]), np.max(still[sure]))
+    free = np.asarray(trace.d2) < 2.0
+    assert np.all(rest[free] == 0)
 
 
 def test_drift_outside_the_people_only(paper_detector, room):

@@ -341,3 +341,29 @@ def test_operator_state_is_replaced_whole_and_a_pointing_ends():
     op.offer_zones(ZoneSwap(None, None, (), 1))
     op.offer_zones(ZoneSwap(None, None, (), 2))
     assert op.take_zones().version == 2 and op.take_zones() is None
+
+
+def test_detects_pipeline_takes_trust_on_a_ghost_site_as_the_loop_does(paper_rig, paper_detector, monkeypatch):
+    """``omnijax detect``'s pipeline (Perception) tells the background's keeper the loop's trust: a
+    trusted track that comes onto a place where an untrusted track stood still (a moved chair a
+    passer-by's track took over) is not trusted there, so the keeper does not protect it from
+    absorption (without the ghost sites, chair_moved 9031's chair stayed detected all of its 104 s)."""
+    from omnijax import learn_background
+    from runtime.realtime.perception import Perception
+
+    rng = np.random.default_rng(3)
+    W, H = paper_rig.omni.image_size
+    floor = np.clip(rng.normal(120.0, 3.0, (4, H, W, 3)), 0, 255).astype(np.uint8)
+    perception = Perception(paper_rig, learn_background(floor), 25.0, 4.0, detector=paper_detector)
+    chair = Track(id=1, x=np.array([1.0, 0.5, 0, 0]), P=np.eye(4), t=0.0)
+    walker = Track(id=2, x=np.array([-1.0, 0.5, 0, 0]), P=np.eye(4), t=0.0, trusted=True)
+    seen = []
+    monkeypatch.setattr(perception.keeper, "trusted", lambda tracks, *_: seen.append(
+        [is_trusted(tr, perception.keeper.trust) for tr in tracks]) or np.zeros(paper_detector.max_people, bool))
+    for k, (tracks, xy) in enumerate((([chair, walker], (-1.0, 0.5)), ([chair, walker], (-1.0, 0.5)),
+                                      ([walker], (1.05, 0.5)))):
+        walker.x[:2] = xy
+        chair.t = walker.t = 0.6 * (k + 1)
+        monkeypatch.setattr(perception.tracker, "step", lambda t, z, R, tracks=tracks: tracks)
+        perception.step(floor[0], 0.6 * (k + 1))
+    assert seen[0] == [False, True] and seen[-1] == [False]
