@@ -282,6 +282,38 @@ def test_a_ghost_beside_furniture_is_still_a_ghost(paper_detector, room):
         assert bool(ghost[k]) and not bool(person[k])
 
 
+def test_a_ghost_is_judged_without_another_persons_samples(paper_detector, room):
+    """A ghost of the learning whose run of lines takes in the body of someone nearer the camera (who
+    stood far out through the learning, then walked in along their own azimuth): at its left side the
+    inside samples are that person's body against the floor, a person's edge, which vetoed the ghost
+    for as long as they stood (standing_start 9035, 2.8 s). Measured only outside every other person's
+    region, the side has no samples and the open side says ghost."""
+    import equinox as eqx
+
+    from omnijax.detection import ghost_evidence, lines_from
+
+    rng, base, person, _ = room
+    det = paper_detector
+    T = det.polar.n_theta
+    lines, dets, cur, mean, d2, k, first, last = _one_detection_in_polar(
+        det, [_noisy(rng, person) for _ in range(20)], _noisy(rng, base))
+    r0, r1 = (int(v) for v in np.asarray(dets.region[k])[2:])
+    body = ((first + np.arange(5)) % T)[:, None], np.arange(r0, r1)[None]
+    floor = mean[(first - 6) % T, r0:r1][None]  # the background there was the floor (not the ghost's)
+    cur[body], mean[body], d2[body] = (170.0, 40.0, 170.0), floor, 1000.0
+    lines = lines_from(jnp.asarray(mean), lines.var_factor, lines.sigma)
+    j = int(np.argmin(np.asarray(dets.valid)))  # a free slot for the body's detection
+    region = dets.region.at[j].set(jnp.array([first - 1, first + 5, r0, r1], dets.region.dtype))
+    for theirs in (False, True):
+        with_body = eqx.tree_at(lambda d: (d.valid, d.region), dets, (dets.valid.at[j].set(theirs), region))
+        ev = ghost_evidence(det, jnp.asarray(cur), lines, jnp.asarray(d2), with_body)
+        ghost, person = verdicts(ev, jnp.zeros(dets.valid.shape, bool), 6.0)
+        if theirs:  # the body is someone's: the left side is not measured, the open right side says ghost
+            assert float(ev.samples[k, 0]) == 0 and bool(ghost[k]) and not bool(person[k])
+        else:  # nobody's: the body's edge at the left side vetoes the ghost
+            assert float(ev.edge_now[k, 0]) > 50 and bool(person[k]) and not bool(ghost[k])
+
+
 def test_a_person_against_a_table_of_their_colour_is_no_ghost(paper_detector, room):
     """Someone standing against a table of their own colour: that side has no edge now and the table's
     edge in the background (a ghost's two signs, on that side); the open side has the person's edge,
