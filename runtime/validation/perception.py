@@ -32,6 +32,10 @@ false alarms
   ``far_field``        beyond :data:`FAR_M` from the camera axis
   ``other``
 misses
+  ``never_seen_free`` the person has stood on their spot since before the first frame the background was
+                       learnt from and has not moved yet: no learning frame saw the floor under them, so
+                       no change detector can see them until they move (standing_start: a first pause
+                       longer than the learning)
   ``merged``           another person within :data:`SAME_SECTOR_RAD` of azimuth was detected (two
                        people in one sector, one detection)
   ``ghost_sector``     a false alarm's sector covers the person's azimuth (merged with a ghost)
@@ -79,7 +83,7 @@ RANGE_BANDS = (0.0, 1.5, 2.5, 3.5, math.inf)
 #: The chi-square(1) 99 % point: a Gaussian coordinate's NEES exceeds it with probability 0.01.
 NEES_99 = 6.63
 FA_CAUSES = ("fragment", "ghost_learning", "ghost_pause", "moved_object", "shadow", "far_field", "other")
-MISS_CAUSES = ("merged", "ghost_sector", "absorbed_standing", "floor_coloured", "far_field", "other")
+MISS_CAUSES = ("never_seen_free", "merged", "ghost_sector", "absorbed_standing", "floor_coloured", "far_field", "other")
 
 
 def match_feet(z: np.ndarray, foot: np.ndarray, gate_m: float = GATE_M) -> list[tuple[int, int, float]]:
@@ -166,6 +170,13 @@ class History:
                 run[t] = np.where(self.moving[t], 0, (run[t - 1] if t else 0) + 1)
             self._still_run = run
         return self._still_run[frame, person] / self.fps
+
+    def never_seen_free(self, frame: int, person: int) -> bool:
+        """The person has stood still at ``frame`` since before the first learning frame."""
+        if not self.learning_frames.size:
+            return False
+        self.still_for(frame, person)
+        return bool(self._still_run[frame, person] > frame - int(self.learning_frames.min()))
 
     def learnt_here(self, xy) -> bool:
         f = self.learning_frames
@@ -317,6 +328,8 @@ class PerceptionScore:
 
     @staticmethod
     def _miss_cause(frame, q, persons, det_of, people, unmatched, history) -> str:
+        if history is not None and history.never_seen_free(frame, q["id"]):
+            return "never_seen_free"
         for c, other in enumerate(persons):
             if other is not q and c in det_of and abs(wrap_pi(other["theta_f"] - q["theta_f"])) <= SAME_SECTOR_RAD:
                 return "merged"
@@ -341,11 +354,18 @@ class PerceptionScore:
             out[f"{lo:g}-{hi:g} m"] = _nees(a[sel])
         return out
 
+    def _miss_rate_seen(self) -> float | None:
+        """The miss rate over the person-frames of people whose floor the learning saw (without the
+        ``never_seen_free`` ones, which no change detector can see)."""
+        n = self.miss_causes["never_seen_free"]
+        return (self.misses - n) / (self.visible - n) if self.visible > n else None
+
     def summary(self) -> dict:
         return {"frames": self.frames, "visible": self.visible, "misses": self.misses, "blind": self.blind,
                 "detections": self.detections, "false_alarms": self.false_alarms,
                 "miss_rate": self.misses / self.visible if self.visible else None,
                 "false_alarm_rate": self.false_alarms / self.detections if self.detections else None,
+                "miss_rate_seen": self._miss_rate_seen(),
                 "fa_causes": {c: self.fa_causes[c] for c in FA_CAUSES},
                 "miss_causes": {c: self.miss_causes[c] for c in MISS_CAUSES},
                 "ghost_gone_s": self.ghost_gone_s, "standing_frames": self.standing_frames,

@@ -65,6 +65,34 @@ def test_a_ghost_ages_from_when_its_person_left_and_a_standing_person_counts():
     assert s["standing_frames"] == 6 and s["standing_detected_rate"] == pytest.approx(5 / 6)
 
 
+def test_someone_standing_since_before_the_learning_is_never_seen_free():
+    """The learning takes frames 1-3. Person 0 stands at (2, 0) from frame 0 to frame 6 and walks from
+    frame 7; person 1 walks in frames 0-1 and stands from frame 2 on. Nobody is detected in frames 4-9:
+    person 0 is ``never_seen_free`` in 4-6 only (no learning frame saw the floor under them); person 1
+    was off their spot in learning frame 1, and is never ``never_seen_free``. The miss rate over the
+    people seen free leaves those 3 person-frames out."""
+    T = 10
+    feet = np.zeros((T, 2, 2))
+    feet[:, 0] = [2.0, 0.0]
+    feet[7:, 0] = [[2.0, 0.3], [2.0, 0.6], [2.0, 0.9]]
+    feet[:, 1] = [-2.0, 0.0]
+    moving = np.zeros((T, 2), bool)
+    moving[7:, 0] = True
+    moving[:2, 1] = True
+    hist = _history(feet, moving, learning=(1, 2, 3))
+    score = PerceptionScore()
+    causes = {0: [], 1: []}
+    for f in range(4, T):
+        out = score.add_frame(f, _truth(f, feet[f]), [], np.zeros((0, 2)), np.zeros((0, 2)), hist)
+        for m in out["missed"]:
+            causes[m["id"]].append(m["cause"])
+    assert causes[0][:3] == ["never_seen_free"] * 3 and "never_seen_free" not in causes[0][3:]
+    assert "never_seen_free" not in causes[1]
+    s = score.summary()
+    assert s["miss_causes"]["never_seen_free"] == 3 and s["misses"] == 12
+    assert s["miss_rate_seen"] == pytest.approx(9 / 9)
+
+
 @pytest.mark.parametrize("spectrum, cause", [([0.8, 0.9, 1.0], "shadow"), ([1.0, 0.93, 0.8], "other")])
 def test_a_false_alarm_in_a_coloured_shadow(spectrum, cause):
     """A lamp 3 m up over the origin and a person 1.5 m tall at (1, 0) cast a shadow on the floor from
