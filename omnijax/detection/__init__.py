@@ -59,6 +59,7 @@ from ._life import (
     learned_share as learned_share,
     live_step as live_step,
     regions as regions,
+    set_aside_ghosts as set_aside_ghosts,
     settle_learning as settle_learning,
     start_life as start_life,
     verdicts as verdicts,

@@ -24,6 +24,8 @@ frame (:func:`live_step`, two jitted calls), after detection, with the frame's d
    before (a person of nearly the floor's colour) is no verdict: neither a ghost's vote nor a
    person's. A lamp of another colour switching on a bare floor has about the same (no) edge in
    both, and gets a ghost's vote in about every other frame.
+   A sure ghost (a trusted detection's verdict) is set aside before anything reads the detections
+   (:func:`set_aside_ghosts`, in the perception step): not a person, still judged and repaired here.
 2. **Repair**: a sample that has changed, stayed unchanged from frame to frame (still) for
    ``still_frames`` and gathered ``ghost_frames`` votes of a ghost is re-learnt from the current frame
    (its variance factor 1: one frame's estimate). The votes are counted while the sample stays
@@ -320,6 +322,47 @@ def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets
     it writes, three times over in the colour's (1.7 ms a frame on one core against 1.0 ms)."""
     renewal, ev, ghostly = _judge(detector, life, frame, dets, d2, trusted, rates)
     return _renew(life, renewal, rates), ev, ghostly
+
+
+#: A ghost is set aside (:func:`set_aside_ghosts`) only where one side shows it clearly: no edge now, over
+#: ASIDE_RADII radii or more, against a person's edge in the background (ASIDE_BEFORE or more). The
+#: background's own edges between floor tiles of slightly different colour measure 10-50 (its variance
+#: is a learnt mean's, a thirtieth of a frame's), and a person dressed like the floor, whose edge now is
+#: faint, was set aside on them (six_people 9040: misses 0.013 -> 0.028 without this); a ghost of
+#: someone who stood in the learning measures hundreds over tens of radii.
+ASIDE_BEFORE, ASIDE_RADII = 100.0, 8.0
+#: ... and only while under this share of its changed samples moved since the frame before (a ghost is
+#: static: sensor noise alone moves about 1e-3 of them).
+ASIDE_MOVED = 0.02
+
+
+def set_aside_ghosts(detector: Detector, frame: UInt8[Array, "H W 3"], lines: LineBackground,
+                     d2: Float[Array, "T R"], dets: Detections, edge, prev: Float[Array, "T R 3"]) -> Detections:
+    """``dets`` with the sure ghosts no longer people (``valid``) but left to the background's life to
+    judge and repair (as ``strip``). A ghost is the background's error, not someone: before, each was
+    reported, tracked and counted for the frames its repair takes (ten at ``ghost_s`` 0.4 s; the ghosts
+    of people who stood through the learning were most of standing_start's false alarms). Sure: both
+    signs of one and no person's edge on either side (:func:`verdicts` as for a trusted detection), one
+    side clear (:data:`ASIDE_BEFORE`), and nothing in its region moved since the frame before (``prev``:
+    the previous frame at the polar samples, :attr:`Life.prev`; under :data:`ASIDE_MOVED` of its changed
+    samples): someone walking off the spot they stood on through the learning is one detection with
+    their ghost, their side's edge now no stronger than the background's there (their own, learnt), and
+    was set aside with it (standing_start 9031: 24 frames missed)."""
+    cur = gather_rgb(jnp.asarray(frame), detector.polar.line_index).astype(jnp.float32)
+    ev = ghost_evidence(detector, cur, lines, d2, dets)
+    clear = (ev.edge_now < edge) & (ev.edge_before >= ASIDE_BEFORE) & (ev.samples >= ASIDE_RADII)
+    T, R = d2.shape
+    changed = (d2 > CHANGED) & detector.polar.line_ok
+    moved = changed & (change_measure(cur, prev, 1.0, lines.sigma) >= CHANGED)
+    first, last, r0, r1 = (dets.region[:, j] for j in range(4))
+    in_lines = ((jnp.arange(T)[None] - first[:, None]) % T <= (last - first)[:, None]).astype(jnp.float32)
+    in_radii = ((jnp.arange(R)[None] >= r0[:, None]) & (jnp.arange(R)[None] < r1[:, None])).astype(jnp.float32)
+    count = lambda m: jnp.sum((in_lines @ m.astype(jnp.float32)) * in_radii, axis=1)  # (K,) samples in region
+    still = count(moved) <= ASIDE_MOVED * count(changed)
+    ghost = dets.valid & verdicts(ev, jnp.ones_like(dets.valid), edge)[0] & jnp.any(clear, axis=-1) & still
+    strip = ghost if dets.strip is None else dets.strip | ghost
+    return eqx.tree_at(lambda d: (d.valid, d.strip), dets, (dets.valid & ~ghost, strip),
+                       is_leaf=lambda x: x is None)
 
 
 #: Fewest learning frames a minority colour must hold to be taken for the floor (a tenth of 30).

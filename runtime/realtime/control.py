@@ -31,24 +31,29 @@ import jax
 import jax.numpy as jnp
 
 from omnijax import Aim, Detector, Rig, aim_at_floor, detect, floor_from_detections
+from omnijax.detection import set_aside_ghosts
 from omnijax.geometry import wrap_pi
 from omnijax.zoom import ZOOM_RULES, face_pixels
 from runtime.realtime import kalman
 
 
 @jax.jit
-def perceive(detector: Detector, rig: Rig, frame, lines):
+def perceive(detector: Detector, rig: Rig, frame, lines, prev=None):
     """Detection (steps 1-6) against the background's polar samples ``lines`` and the detections'
     floor positions with covariances (the aim pipeline's :func:`~omnijax.aiming.floor_from_detections`,
     under its sigma rule). Returns the detections, their trace (the frame's d^2 for the background's
     life), the floor points and covariances. A detection whose foot lies more than ``[detection]
     off_floor_m`` outside the room's floor (beyond the outline or inside an excluded zone: a change on
-    a wall or on furniture) is no person and is marked invalid."""
+    a wall or on furniture) is no person and is marked invalid; so, given ``prev`` (the previous frame at
+    the polar samples, the background's life's), is a sure ghost that has not moved (no edge now, a
+    strong one in the background: :func:`~omnijax.detection.set_aside_ghosts`), left to the life."""
     dets, trace = detect(detector, frame, lines)
     z, R = floor_from_detections(rig, dets.r_f, dets.theta_f, dets.sigma_r_f, dets.sigma_theta_f,
                                  dets.bound_r_f, dets.bound_theta_f)
     on_floor = rig.room.outside_by(z[:, 0], z[:, 1]) <= rig.detection.off_floor_m
     dets = eqx.tree_at(lambda d: d.valid, dets, dets.valid & on_floor)
+    if prev is not None:
+        dets = set_aside_ghosts(detector, frame, lines, trace.d2, dets, rig.detection.ghost_edge, prev)
     return dets, trace, z, R
 
 
@@ -102,13 +107,13 @@ class Control(eqx.Module):
 
 @functools.partial(jax.jit, static_argnames=("mode", "confirm"))
 def control_step(detector: Detector, rig: Rig, frame, lines, slots, t, accel_sd, nearest_gate_m,
-                 slew: Slew, mode: str = "kalman", confirm: int = 2) -> Control:
+                 slew: Slew, mode: str = "kalman", confirm: int = 2, prev=None) -> Control:
     """Frame -> detections -> tracks -> pan/tilt/zoom of every (PTZ, confirmed track) pair, in one
     compiled call (see the module docstring). ``slots``: the tracker's (x, P, t, live, hits) slot arrays
     (:meth:`~runtime.realtime.tracker.Tracker.slots`); ``t``: the frame's time (s); ``slew``: each PTZ's
     last command and rates; ``mode``, ``accel_sd``, ``nearest_gate_m``, ``confirm``: the tracker's
-    settings."""
-    dets, trace, z, R = perceive(detector, rig, frame, lines)
+    settings; ``prev``: the previous frame at the polar samples (:func:`perceive`)."""
+    dets, trace, z, R = perceive(detector, rig, frame, lines, prev)
     x, P, t_tracks, live, hits = slots
     assign, x_new, P_new = kalman.step(mode, accel_sd, nearest_gate_m, x, P, t_tracks, live, t, z, R, dets.valid)
     confirmed = (assign >= 0) & (hits + 1 >= confirm)

@@ -242,7 +242,7 @@ class RealTimeLoop:
         tr = self.tracker
         return control_step(self.detector, self.rig, image, self.keeper.lines, tr.slots(self.n_slots),
                             np.asarray(t, float), tr.accel_sd, tr.nearest_gate_m, slew, mode=tr.mode,
-                            confirm=tr.confirm)
+                            confirm=tr.confirm, prev=self.keeper.life.prev)
 
     def warm_up(self):
         """Compile the jitted stages on a frame of the right size before timing anything; returns

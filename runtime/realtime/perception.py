@@ -196,7 +196,7 @@ class Perception:
 
     def step(self, image: np.ndarray, t: float):
         x = jnp.asarray(image)
-        dets_d, trace, z_d, R_d = perceive(self.detector, self.rig, x, self.keeper.lines)
+        dets_d, trace, z_d, R_d = perceive(self.detector, self.rig, x, self.keeper.lines, self.keeper.life.prev)
         dets, z, R = jax.device_get((dets_d, z_d, R_d))
         valid = np.nonzero(np.asarray(dets.valid))[0]
         tracks = self.tracker.step(t, np.asarray(z)[valid], np.asarray(R)[valid])

@@ -314,6 +314,29 @@ def test_a_ghost_is_judged_without_another_persons_samples(paper_detector, room)
             assert float(ev.edge_now[k, 0]) > 50 and bool(person[k]) and not bool(ghost[k])
 
 
+def test_a_sure_ghost_is_set_aside_for_the_life_and_a_person_is_not(paper_detector, room):
+    """Learnt with someone standing there and now empty, unchanged since the frame before: the one
+    detection is a sure ghost, no longer a person (``valid``) but still the life's to judge (``strip``, a
+    life candidate). The same with the frame before showing the person still there (they walked off in
+    this frame: their region moved) is not set aside. Learnt empty and now with the person there: they
+    stay a person."""
+    from omnijax.detection import life_candidates, set_aside_ghosts
+    from omnijax.detection._indexing import gather_rgb
+
+    rng, base, person, _ = room
+    det = paper_detector
+    polar = lambda img: gather_rgb(jnp.asarray(img), det.polar.line_index).astype(jnp.float32)
+    for learnt, before, now, ghost in ((person, base, base, True), (person, person, base, False),
+                                       (base, person, person, False)):
+        lines = line_background(det, learn_background(np.stack([_noisy(rng, learnt) for _ in range(20)])))
+        frame = jnp.asarray(_noisy(rng, now))
+        dets, trace = detect(det, frame, lines)
+        assert int(np.asarray(dets.valid).sum()) == 1
+        after = set_aside_ghosts(det, frame, lines, trace.d2, dets, 6.0, polar(_noisy(rng, before)))
+        assert int(np.asarray(after.valid).sum()) == (0 if ghost else 1)
+        assert np.array_equal(np.asarray(life_candidates(after)), np.asarray(life_candidates(dets)))
+
+
 def test_a_person_against_a_table_of_their_colour_is_no_ghost(paper_detector, room):
     """Someone standing against a table of their own colour: that side has no edge now and the table's
     edge in the background (a ghost's two signs, on that side); the open side has the person's edge,
