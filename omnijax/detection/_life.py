@@ -191,9 +191,7 @@ def _elsewhere(dets: Detections, a: Array, rr: Array, T: int) -> Bool[Array, "K 
     the camera at its azimuth (who had stood far out through the learning and then walked in along
     their own line) showed that person's edge as its own and was never judged (standing_start 9035:
     70 frames, 2.8 s)."""
-    first, last, r0, r1 = (dets.region[:, j] for j in range(4))  # (J,)
-    in_lines = (a[None] - first[:, None, None]) % T <= (last - first)[:, None, None]  # (J, K, R)
-    in_radii = (rr[None] >= r0[:, None, None]) & (rr[None] < r1[:, None, None])
+    in_lines, in_radii = _in_region(dets, a, rr, T)  # (J, K, R): person j's region at k's samples
     K = a.shape[0]
     other = dets.valid[:, None] & ~jnp.eye(K, dtype=bool)  # (J, K): person j, not k itself
     return jnp.any(other[..., None] & in_lines & in_radii, axis=0)
@@ -207,13 +205,17 @@ def _side_means(now, before, measured):
     return mean(now), mean(before), n
 
 
+def _in_region(dets: Detections, t: Array, r: Array, T: int) -> tuple[Array, Array]:
+    """Whether line indices ``t`` and radius indices ``r`` (any shape) lie in each detection's explained
+    region's lines and radii: two masks of shape (K, *t.shape) and (K, *r.shape)."""
+    first, last, r0, r1 = (dets.region[:, j].reshape(-1, *([1] * t.ndim)) for j in range(4))
+    return (t[None] - first) % T <= (last - first), (r[None] >= r0) & (r[None] < r1)
+
+
 def regions(dets: Detections, which: Bool[Array, " K"], shape) -> Bool[Array, "T R"]:
     """The polar samples inside the explained region of any detection in ``which``."""
     T, R = shape
-    t, r = jnp.arange(T), jnp.arange(R)
-    first, last, r0, r1 = (dets.region[:, j] for j in range(4))
-    in_lines = (t[None] - first[:, None]) % T <= (last - first)[:, None]  # (K, T)
-    in_radii = (r[None] >= r0[:, None]) & (r[None] < r1[:, None])  # (K, R)
+    in_lines, in_radii = _in_region(dets, jnp.arange(T), jnp.arange(R), T)  # (K, T), (K, R)
     return jnp.any(which[:, None, None] & in_lines[:, :, None] & in_radii[:, None, :], axis=0)
 
 
@@ -354,9 +356,7 @@ def set_aside_ghosts(detector: Detector, frame: UInt8[Array, "H W 3"], lines: Li
     T, R = d2.shape
     changed = (d2 > CHANGED) & detector.polar.line_ok
     moved = changed & (change_measure(cur, prev, 1.0, lines.sigma) >= CHANGED)
-    first, last, r0, r1 = (dets.region[:, j] for j in range(4))
-    in_lines = ((jnp.arange(T)[None] - first[:, None]) % T <= (last - first)[:, None]).astype(jnp.float32)
-    in_radii = ((jnp.arange(R)[None] >= r0[:, None]) & (jnp.arange(R)[None] < r1[:, None])).astype(jnp.float32)
+    in_lines, in_radii = (m.astype(jnp.float32) for m in _in_region(dets, jnp.arange(T), jnp.arange(R), T))
     count = lambda m: jnp.sum((in_lines @ m.astype(jnp.float32)) * in_radii, axis=1)  # (K,) samples in region
     still = count(moved) <= ASIDE_MOVED * count(changed)
     ghost = dets.valid & verdicts(ev, jnp.ones_like(dets.valid), edge)[0] & jnp.any(clear, axis=-1) & still

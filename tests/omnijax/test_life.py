@@ -252,6 +252,15 @@ def _one_detection_in_polar(det, bg_frames, now):
     return lines, dets, cur, np.array(lines.mean), np.array(trace.d2), k, first, last
 
 
+def _a_ghost_in_polar(det, room):
+    """:func:`_one_detection_in_polar` for a ghost (learnt with the person, now the empty floor), and
+    the ghost's first and end radius index."""
+    rng, base, person, _ = room
+    out = _one_detection_in_polar(det, [_noisy(rng, person) for _ in range(20)], _noisy(rng, base))
+    dets, k = out[1], out[5]
+    return (*out, *(int(v) for v in np.asarray(dets.region[k])[2:]))
+
+
 def test_a_ghost_beside_furniture_is_still_a_ghost(paper_detector, room):
     """A ghost whose one side adjoins furniture over the radii where only that side is measured: its
     other side continues the floor, and each side judged on its own says ghost (taking the sides radius
@@ -259,12 +268,9 @@ def test_a_ghost_beside_furniture_is_still_a_ghost(paper_detector, room):
     clip)."""
     from omnijax.detection import ghost_evidence, lines_from
 
-    rng, base, person, _ = room
     det = paper_detector
     T = det.polar.n_theta
-    lines, dets, cur, mean, d2, k, first, last = _one_detection_in_polar(
-        det, [_noisy(rng, person) for _ in range(20)], _noisy(rng, base))
-    r0, r1 = (int(v) for v in np.asarray(dets.region[k])[2:])
+    lines, dets, cur, mean, d2, k, first, last, r0, r1 = _a_ghost_in_polar(det, room)
     outer = np.arange((r0 + r1) // 2, r1)
     # the outer radii: the ghost's left edge lies further in (unchanged there), and a blue cupboard stands
     # beyond its right edge, in the background and now
@@ -292,12 +298,9 @@ def test_a_ghost_is_judged_without_another_persons_samples(paper_detector, room)
 
     from omnijax.detection import ghost_evidence, lines_from
 
-    rng, base, person, _ = room
     det = paper_detector
     T = det.polar.n_theta
-    lines, dets, cur, mean, d2, k, first, last = _one_detection_in_polar(
-        det, [_noisy(rng, person) for _ in range(20)], _noisy(rng, base))
-    r0, r1 = (int(v) for v in np.asarray(dets.region[k])[2:])
+    lines, dets, cur, mean, d2, k, first, last, r0, r1 = _a_ghost_in_polar(det, room)
     body = ((first + np.arange(5)) % T)[:, None], np.arange(r0, r1)[None]
     floor = mean[(first - 6) % T, r0:r1][None]  # the background there was the floor (not the ghost's)
     cur[body], mean[body], d2[body] = (170.0, 40.0, 170.0), floor, 1000.0
