@@ -128,15 +128,20 @@ def hysteresis_sectors(M: Float[Array, " T"], lower: Float[Array, " T"], upper: 
 
     Runs of ``M > lower`` (wrapping around theta = 0) that contain a line with
     ``M > upper``; the ``max_sectors`` with the largest peaks. ``last`` may exceed
-    ``T - 1`` for a run that wraps; take it modulo T.
+    ``T - 1`` for a run that wraps; take it modulo T. Every line above ``lower`` is one
+    run of the whole circle, from its weakest line (someone under the camera is in every
+    line: six_people 9050 had no sector, so no detection of anyone, for 36 frames).
     """
     T = M.shape[0]
     above = M > lower
-    shift = jnp.argmin(above)  # a line below the lower threshold (0 if every line is above)
+    every = jnp.all(above)
+    # start after a line below the lower threshold, or, when there is none, at the weakest line
+    shift = jnp.where(every, jnp.argmin(M), jnp.argmin(above))
     a = jnp.roll(above, -shift)
     seed = jnp.roll(M > upper, -shift)
     m = jnp.roll(M, -shift)
     start = a & ~jnp.roll(a, 1)
+    start = start.at[0].set(start[0] | every)  # the whole circle: one run from the weakest line
     run = jnp.where(a, jnp.cumsum(start) - 1, T)
     idx = jnp.arange(T)
     seeded = jax.ops.segment_max(seed.astype(jnp.int32), run, num_segments=T + 1)[:T] > 0

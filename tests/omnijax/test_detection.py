@@ -104,7 +104,8 @@ def _python_hysteresis(M, lo, hi):
     T = len(M)
     above = M > lo
     if above.all():
-        return [(0, T - 1)] if (M > hi).any() else []
+        start = int(np.argmin(M))
+        return [(start, (start - 1) % T)] if (M > hi).any() else []
     start = int(np.argmin(above))
     runs, cur = [], None
     for k in range(start, start + T):
@@ -144,6 +145,25 @@ def test_hysteresis_sector_across_zero_and_top_k():
     s = hysteresis_sectors(jnp.asarray(M), jnp.full(36, 2.0), jnp.full(36, 7.0), 3)
     got = [(int(a) % 36, int(b) % 36, float(p)) for a, b, p, v in zip(s.first, s.last, s.peak, s.valid) if v]
     assert got == [(34, 1, 9.0), (20, 22, 8.0)]
+
+
+def test_every_line_above_the_lower_threshold_is_one_sector_of_the_whole_circle():
+    """Someone under the camera is in every line: the circle is one sector from its weakest line (it was
+    none, and nobody in the room was detected)."""
+    M = np.full(36, 3.0)
+    M[[5, 6, 7]] = [8.0, 12.0, 8.0]
+    M[20] = 2.5  # the weakest line, still above lower
+    s = hysteresis_sectors(jnp.asarray(M), jnp.full(36, 2.0), jnp.full(36, 7.0), 3)
+    got = [(int(a) % 36, int(b) % 36, float(p)) for a, b, p, v in zip(s.first, s.last, s.peak, s.valid) if v]
+    assert got == [(20, 19, 12.0)]
+    assert not any(hysteresis_sectors(jnp.asarray(M), jnp.full(36, 2.0), jnp.full(36, 13.0), 3).valid)
+    for T in (12, 36, 360):  # the reference agrees, at every shift of the weakest line
+        for weakest in (0, T // 3, T - 1):
+            M = 3.0 + np.random.default_rng(T).exponential(1.0, T)
+            M[weakest], M[(weakest + 2) % T] = 2.1, 9.0
+            s = _hysteresis(jnp.asarray(M), jnp.full(T, 2.0), jnp.full(T, 7.0), 3)
+            ours = sorted((int(a) % T, int(b) % T) for a, b, v in zip(s.first, s.last, s.valid) if v)
+            assert ours == _python_hysteresis(M, np.full(T, 2.0), np.full(T, 7.0)) == [(weakest, (weakest - 1) % T)]
 
 
 @settings(max_examples=100)
