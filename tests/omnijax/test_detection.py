@@ -251,6 +251,30 @@ def test_detects_a_painted_person(paper_detector, painted, radius, theta):
     assert step / math.sqrt(24) * (1 - 1e-9) <= float(d.sigma_theta_f[k]) < 2 * step  # one person: no excess width
 
 
+def test_someone_under_the_camera_does_not_hide_the_others(paper_detector, painted):
+    """A person right under the camera is in every radial line (a disc over the first foot hypothesis's
+    extent): every line is above psi1's lower threshold, and the circle is one sector. Before, it was no
+    sector, and the other person, at 70 px, was not found either (six_people 9050: 36 frames, six people
+    in view, no detection)."""
+    rng, base, bg, lines = painted
+    polar = paper_detector.polar
+    first = int(polar.hyp_first)
+    cx, cy = np.asarray(paper_detector.omni.center)
+    yy, xx = np.mgrid[:base.shape[0], :base.shape[1]]
+    disc = np.hypot(xx - cx, yy - cy) < float(polar.radii[0] + polar.hyp_out[first]) - 0.5
+    img = base.copy()
+    img[disc] = img[disc] * np.asarray((0.85, 1.1, 1.0))
+    i = int(np.argmin(np.abs(np.asarray(polar.radii) - 70.0)))
+    d, trace = detect(paper_detector, jnp.asarray(_noisy(rng, _paint_person(rng, img, paper_detector, i, 1.0))), lines)
+    assert bool(np.all(np.asarray(trace.M) > np.asarray(paper_detector.thresholds.lower)))  # the case itself
+    valid = np.flatnonzero(np.asarray(d.valid))
+    far = [k for k in valid if float(d.r_f[k]) > 50.0]
+    assert len(far) == 1
+    assert float(d.r_f[far[0]]) == pytest.approx(float(polar.hyp_r_f[i]), abs=3.0)
+    assert math.remainder(float(d.theta_f[far[0]]) - 1.0, 2 * math.pi) == pytest.approx(0.0, abs=0.03)
+    assert any(int(k) not in far for k in valid)  # and the one under the camera, on the first hypothesis
+
+
 def test_fragments_merge_by_floor_distance_and_under_the_camera():
     """Feet closer than MERGE_M: the weaker (later) goes; two on the innermost foot hypothesis (a
     person under the camera, fanned over a wide angle) merge within the blind disc's diameter, two
