@@ -88,7 +88,7 @@ def run_scenario(name: str, n_frames: int, measure: str, seed: int, stride: int 
         tr = f.truth
         valid = np.nonzero(np.asarray(d.valid))[0]
         rule_r, rule_t = (np.asarray(a) for a in detection_sigmas(rig, d.sigma_r_f, d.sigma_theta_f, d.bound_r_f,
-                                                                                  d.bound_theta_f))
+                                                                                  d.bound_theta_f, d.r_f))
         used = set()
         th_all = np.asarray(tr.theta_f)
         for p in range(th_all.shape[0]):

@@ -3,8 +3,11 @@
 Each detection's sigma handed to the pointing covariance is
 
     sigma_r_f^2     = (sigma_gain_r_f     * detector's sigma_r_f)^2     + bound_r_f^2     + sigma_extra_r_f^2
+                      + (sigma_extra_r_f_per_m * R)^2
     sigma_theta_f^2 = (sigma_gain_theta_f * detector's sigma_theta_f)^2 + bound_theta_f^2 + sigma_extra_theta_f^2
+                      + (sigma_lateral_m / R)^2
 
+with ``R`` the foot's floor distance (m, at least ``min_floor_radius``)
 (``[detection]`` keys; the detector's sigmas carry the per-detection quality: its foot Monte Carlo
 for the contrast and radius, and the sector's width beyond one person's for merged sectors and
 partial occlusion; the bound parts, a foot the detector could not see, are added as they are).
@@ -13,7 +16,7 @@ folders, matches every visible person to the detection whose sector holds them (
 benchmarks/detection_accuracy.py: the true foot azimuth within half the sector's width + 0.05 rad;
 isolated = no other person within 0.35 rad), and
 
-- ``fit``: finds the four coefficients by maximum likelihood of a Gaussian in each error (every
+- ``fit``: finds the six coefficients by maximum likelihood of a Gaussian in each error (every
   error counts, so the NEES is honest over all detections; ``--outliers`` mixes in a uniform
   outlier share and prints it: errors the detector's quality features do not flag), printing the
   TOML lines for the rig's ``[detection]``;
@@ -97,10 +100,10 @@ def matched(render_dir: Path, detect_dir: Path) -> dict[str, np.ndarray]:
                              q.get("detector_sigma_r_f", q["sigma_r_f"]),
                              q.get("detector_sigma_theta_f", q["sigma_theta_f"]),
                              float(others.min(initial=math.inf) > ISOLATED),
-                             q.get("detector_bound_r_f", 0.0), q.get("detector_bound_theta_f", 0.0)))
-    a = np.array(rows, float).reshape(-1, 7)
+                             q.get("detector_bound_r_f", 0.0), q.get("detector_bound_theta_f", 0.0), q["r_f"]))
+    a = np.array(rows, float).reshape(-1, 8)
     return {"e_r": a[:, 0], "e_t": a[:, 1], "s_r": a[:, 2], "s_t": a[:, 3], "isolated": a[:, 4] > 0,
-            "b_r": a[:, 5], "b_t": a[:, 6]}
+            "b_r": a[:, 5], "b_t": a[:, 6], "r_f": a[:, 7]}
 
 
 def pooled(pairs: list[tuple[Path, Path]]) -> dict[str, np.ndarray]:
@@ -109,31 +112,58 @@ def pooled(pairs: list[tuple[Path, Path]]) -> dict[str, np.ndarray]:
 
 
 def fit_component(e: np.ndarray, s: np.ndarray, bound: np.ndarray | float = 0.0,
-                  outliers: bool = False) -> tuple[float, float, float]:
-    """(gain, extra, outlier share) maximising the likelihood of errors ``e`` under a Gaussian with
-    sigma^2 = (gain s)^2 + bound^2 + extra^2; with ``outliers``, mixed with a uniform outlier over the errors'
-    range. Without (the default), every error counts, so the NEES's mean is honest over all
+                  outliers: bool = False, ranged: np.ndarray | float = 0.0) -> tuple[float, float, float, float]:
+    """(gain, extra, range coefficient, outlier share) maximising the likelihood of errors ``e`` under a
+    Gaussian with sigma^2 = (gain s)^2 + bound^2 + extra^2 + (coefficient ranged)^2 (``ranged``: R for
+    r_f, 1 / R for theta_f; 0: no range term, coefficient 0); with ``outliers``, mixed with a uniform
+    outlier over the errors' range. Without (the default), every error counts, so the NEES's mean is honest over all
     detections, gross ones included (what the zoom must survive); with, the fit describes the clean
     core and the outlier share says how much the detector's quality features do not flag."""
     width = 2 * np.max(np.abs(e))
+    use_range = bool(np.any(np.asarray(ranged) != 0))
     def nll(p):
-        var = np.exp(2 * p[0]) * s**2 + bound**2 + np.exp(2 * p[1])
+        var = (np.exp(2 * p[0]) * s**2 + bound**2 + np.exp(2 * p[1])
+               + (np.exp(2 * p[3]) if use_range else 0.0) * ranged**2)
         eps = 1 / (1 + np.exp(-p[2])) if outliers else 0.0
         dens = (1 - eps) * np.exp(-0.5 * e**2 / var) / np.sqrt(2 * np.pi * var) + eps / width
         return -np.sum(np.log(dens))
-    x0 = np.array([0.0, np.log(max(np.median(np.abs(e)), 1e-6)), -3.0])
-    res = minimize(nll, x0, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-9, "maxiter": 8000})
+    scale = np.log(max(np.median(np.abs(e)), 1e-6))
+    per = scale - np.log(max(np.median(np.abs(ranged)), 1e-9)) if use_range else 0.0
+    # a few starts: from one alone, a term whose log runs off to -inf (a coefficient of 0) stays there
+    starts = [np.array([0.0, scale + a, -3.0, per + b]) for a in (0.0, -1.0, -2.0) for b in (0.0, -1.0, -2.0)]
+    res = min((minimize(nll, x0, method="Nelder-Mead", options={"xatol": 1e-7, "fatol": 1e-9, "maxiter": 20000})
+               for x0 in (starts if use_range else starts[:3])), key=lambda r: r.fun)
     share = float(1 / (1 + np.exp(-res.x[2]))) if outliers else 0.0
-    return float(np.exp(res.x[0])), float(np.exp(res.x[1])), share
+    return float(np.exp(res.x[0])), float(np.exp(res.x[1])), float(np.exp(res.x[3])) if use_range else 0.0, share
 
 
 def from_records(paths: list[Path]) -> dict[str, np.ndarray]:
     """Matched detections written by ``perception_sweep.py --records`` (its floor-gated matching):
     the same keys as :func:`matched`, ``isolated`` all true (the sweep's records do not say)."""
     rows = [r for p in paths for recs in json.loads(p.read_text()).values() for r in recs]
-    a = np.array([list(r[:7]) + [0.0] * (7 - len(r)) for r in rows], float).reshape(-1, 7)  # older records: no bounds
-    return {"e_r": a[:, 1], "e_t": a[:, 2], "s_r": a[:, 3], "s_t": a[:, 4], "isolated": np.ones(len(a), bool),
-            "R": a[:, 0], "b_r": a[:, 5], "b_t": a[:, 6]}
+    # older records: no bounds (7 columns), no true r_f (8)
+    a = np.array([list(r[:8]) + [np.nan] * (8 - len(r)) for r in rows], float).reshape(-1, 8)
+    a[:, 5:7] = np.nan_to_num(a[:, 5:7])
+    data = {"e_r": a[:, 1], "e_t": a[:, 2], "s_r": a[:, 3], "s_t": a[:, 4], "isolated": np.ones(len(a), bool),
+            "b_r": a[:, 5], "b_t": a[:, 6]}
+    if np.all(np.isfinite(a[:, 7])):  # the detection's r_f (the true one plus the error): what the rule sees
+        return {**data, "r_f": a[:, 7] + a[:, 1]}
+    return {**data, "R": a[:, 0]}  # the true foot's floor distance
+
+
+def floor_distances(rig, data: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Each matched detection's foot floor distance R (m, at least ``min_floor_radius``, as the sigma rule
+    takes it) and image radius r_f (px), from whichever of the two the data carry."""
+    from omnijax.geometry import floor_radius, point_image_radius
+
+    o = rig.omni
+    if "R" in data:
+        R = data["R"]
+        r_f = np.asarray(point_image_radius(np.asarray(R), 0.0, o.r_m, o.H_o, o.profile))
+    else:
+        r_f = data["r_f"]
+        R = np.asarray(floor_radius(np.asarray(r_f), o.r_m, o.H_o, o.profile)[0])
+    return np.maximum(R, float(rig.detection.min_floor_radius)), r_f
 
 
 def nees_figures(e: np.ndarray, s: np.ndarray) -> dict:
@@ -146,7 +176,8 @@ def nees_figures(e: np.ndarray, s: np.ndarray) -> dict:
 def score(rig, data: dict[str, np.ndarray]) -> dict:
     from omnijax.aiming import detection_sigmas
 
-    s_r, s_t = (np.asarray(a) for a in detection_sigmas(rig, data["s_r"], data["s_t"], data["b_r"], data["b_t"]))
+    _, r_f = floor_distances(rig, data)
+    s_r, s_t = (np.asarray(a) for a in detection_sigmas(rig, data["s_r"], data["s_t"], data["b_r"], data["b_t"], r_f))
     out = {}
     for name, sel in (("all", np.ones_like(data["isolated"])), ("isolated", data["isolated"])):
         out[name] = {"r_f": nees_figures(data["e_r"][sel], s_r[sel]),
@@ -178,12 +209,14 @@ def main() -> int:
             return 0
     if args.mode == "fit":
         data = data if args.records else pooled(pairs)
-        g_r, x_r, o_r = fit_component(data["e_r"], data["s_r"], data["b_r"], args.outliers)
-        g_t, x_t, o_t = fit_component(data["e_t"], data["s_t"], data["b_t"], args.outliers)
+        R, _ = floor_distances(rig, data)
+        g_r, x_r, k_r, o_r = fit_component(data["e_r"], data["s_r"], data["b_r"], args.outliers, R)
+        g_t, x_t, k_t, o_t = fit_component(data["e_t"], data["s_t"], data["b_t"], args.outliers, 1.0 / R)
         print(json.dumps({"detections": int(data["e_r"].size), "isolated": int(data["isolated"].sum()),
                           "outlier_share_r_f": o_r, "outlier_share_theta_f": o_t}))
-        print(f"sigma_gain_r_f = {g_r:.4g}\nsigma_extra_r_f = {x_r:.4g}\n"
-              f"sigma_gain_theta_f = {g_t:.4g}\nsigma_extra_theta_f_deg = {math.degrees(x_t):.4g}")
+        print(f"sigma_gain_r_f = {g_r:.4g}\nsigma_extra_r_f = {x_r:.4g}\nsigma_extra_r_f_per_m = {k_r:.4g}\n"
+              f"sigma_gain_theta_f = {g_t:.4g}\nsigma_extra_theta_f_deg = {math.degrees(x_t):.4g}\n"
+              f"sigma_lateral_m = {k_t:.4g}")
         return 0
     per = {f"{r.name}": score(rig, matched(r, d)) for r, d in pairs}
     per["pooled"] = score(rig, pooled(pairs))

@@ -54,7 +54,7 @@ def floor_and_sigmas(rig, people: list[dict]) -> tuple[np.ndarray, np.ndarray]:
     s_t = np.array([p.get("detector_sigma_theta_f", p["sigma_theta_f"]) for p in people])
     b_r, b_t = (np.array([p.get(f"detector_bound_{k}", 0.0) for p in people]) for k in ("r_f", "theta_f"))
     z, _ = floor_from_detections(rig, r, t, s_r, s_t, b_r, b_t)
-    sr, st = detection_sigmas(rig, s_r, s_t, b_r, b_t)
+    sr, st = detection_sigmas(rig, s_r, s_t, b_r, b_t, r)
     return np.asarray(z), np.stack([np.asarray(sr), np.asarray(st)], -1)
 
 

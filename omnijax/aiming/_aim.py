@@ -37,7 +37,7 @@ from jaxtyping import Array, Float
 
 from ..calibration import with_mounting_sigma
 from ..config import Rig
-from ..geometry import Pointing, floor_measurement, floor_to_image, image_position, pointing
+from ..geometry import Pointing, floor_measurement, floor_radius, floor_to_image, image_position, pointing
 from ..uncertainty import PointingCovariance, pointing_covariance, pointing_covariance_full
 from ..zoom import ZOOM_RULES, ZoomChoice, choose_zoom
 
@@ -70,27 +70,44 @@ def _rules(rig: Rig, rules) -> tuple[str, ...]:
     return out
 
 
-def detection_sigmas(rig: Rig, sigma_r_f=None, sigma_theta_f=None, bound_r_f=0.0, bound_theta_f=0.0
+def detection_sigmas(rig: Rig, sigma_r_f=None, sigma_theta_f=None, bound_r_f=0.0, bound_theta_f=0.0, r_f=None
                      ) -> tuple[Array, Array]:
     """The sigma rule: the (sigma_r_f px, sigma_theta_f rad) handed to the covariance for a detection.
 
-    ``sqrt((gain * detector's sigma)^2 + bound^2 + extra^2)`` per coordinate, with the rig's ``[detection]``
-    ``sigma_gain_*`` and ``sigma_extra_*``: the detector's sigmas carry each detection's quality (the
-    foot's Monte Carlo at its contrast and radius; a sector wider or narrower than one person there:
-    two people or a ghost in it, partial occlusion; the foot at the sampled range's edge), the gain
-    and the extra term calibrate them against the synthetic world's truth
-    (benchmarks/fit_detection_sigmas.py; docs/detection.md, "Honest sigmas"). The detector's bound
-    part (``Detections.bound_r_f``, ``bound_theta_f``: a foot it could not see, of a person reaching
-    into the blind disc under the camera or past the image's edge) is added as it is: it is a spread
-    of where the foot can be, not a quality the gain calibrates. ``None`` (an aim without
-    a detection: the layout optimiser, calibration points): the rig's ``sigma_r_f``,
-    ``sigma_theta_f`` as they are. Broadcasts.
+    Per coordinate, in quadrature: ``gain * detector's sigma``, the detector's ``bound``, a constant
+    ``extra``, and a term of the foot's floor distance ``R`` (from ``r_f``, px; eq 1), with the rig's
+    ``[detection]`` coefficients::
+
+        sigma_r_f^2 = (sigma_gain_r_f * s_r)^2 + bound_r^2 + sigma_extra_r_f^2 + (sigma_extra_r_f_per_m * R)^2
+        sigma_theta_f^2 = (sigma_gain_theta_f * s_t)^2 + bound_t^2 + sigma_extra_theta_f^2 + (sigma_lateral_m / R)^2
+
+    The detector's sigmas carry each detection's quality (the foot's Monte Carlo at its contrast and
+    radius; a sector wider or narrower than one person there: two people or a ghost in it, partial
+    occlusion; the foot at the sampled range's edge); the gains and the other terms calibrate them
+    against the synthetic world's truth (benchmarks/fit_detection_sigmas.py; docs/detection.md,
+    "Honest sigmas"). The range terms are what a constant could not carry: the foot's radius is worse
+    the farther the person (lower contrast, the upper body against the walls), and an error across
+    the line of sight of a few millimetres of floor (the legs' pose, the body's outline) is a larger
+    azimuth the nearer the person (``R`` at least ``min_floor_radius``). The detector's bound part
+    (``Detections.bound_r_f``, ``bound_theta_f``: a foot it could not see, of a person reaching into
+    the blind disc under the camera or past the image's edge) is added as it is: it is a spread of
+    where the foot can be, not a quality the gain calibrates. ``None`` (an aim without a detection:
+    the layout optimiser, calibration points): the rig's ``sigma_r_f``, ``sigma_theta_f`` as they
+    are. ``r_f`` ``None``: no range terms. Broadcasts.
     """
     d = rig.detection
-    rule = lambda gain, s, bound, extra: jnp.sqrt((gain * s) ** 2 + jnp.asarray(bound) ** 2 + extra**2)
-    s_r = d.sigma_r_f if sigma_r_f is None else rule(d.sigma_gain_r_f, sigma_r_f, bound_r_f, d.sigma_extra_r_f)
+    if r_f is None:
+        range_r = range_t = 0.0
+    else:
+        omni = rig.omni
+        R = jnp.maximum(floor_radius(jnp.asarray(r_f, float), omni.r_m, omni.H_o, omni.profile)[0], d.min_floor_radius)
+        range_r, range_t = d.sigma_extra_r_f_per_m * R, d.sigma_lateral_m / R
+    rule = lambda gain, s, bound, extra, ranged: jnp.sqrt(
+        (gain * s) ** 2 + jnp.asarray(bound) ** 2 + extra**2 + ranged**2)
+    s_r = (d.sigma_r_f if sigma_r_f is None
+           else rule(d.sigma_gain_r_f, sigma_r_f, bound_r_f, d.sigma_extra_r_f, range_r))
     s_t = (d.sigma_theta_f if sigma_theta_f is None
-           else rule(d.sigma_gain_theta_f, sigma_theta_f, bound_theta_f, d.sigma_extra_theta_f))
+           else rule(d.sigma_gain_theta_f, sigma_theta_f, bound_theta_f, d.sigma_extra_theta_f, range_t))
     return jnp.asarray(s_r, float), jnp.asarray(s_t, float)
 
 
@@ -102,7 +119,7 @@ def floor_from_detections(rig: Rig, r_f, theta_f, sigma_r_f, sigma_theta_f, boun
     Only detection noise enters (calibration errors are the same at every frame and are added
     when pointing). Broadcasts over detections.
     """
-    s_r, s_t = detection_sigmas(rig, sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f)
+    s_r, s_t = detection_sigmas(rig, sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f, r_f)
     return floor_measurement(rig, r_f, theta_f, s_r, s_t)
 
 
@@ -146,7 +163,8 @@ def aim_detection(rig: Rig, r_f, theta_f, sigma_r_f=None, sigma_theta_f=None,
                   rules: tuple[str, ...] | None = None, zero_sigma=None, bound_r_f=0.0, bound_theta_f=0.0) -> Aim:
     """Pan/tilt/zoom for a detection at (``r_f`` px, ``theta_f`` rad) with the detector's sigmas
     (and bound parts), under the sigma rule (:func:`detection_sigmas`; ``None``: the rig's defaults)."""
-    s_r, s_t = detection_sigmas(rig, sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f)
+    s_r, s_t = detection_sigmas(rig, sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f,
+                                None if sigma_r_f is None else r_f)
     return aim_from_image(rig, r_f, theta_f, jnp.diag(jnp.stack([s_r**2, s_t**2])), rules, zero_sigma)
 
 

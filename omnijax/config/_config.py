@@ -138,8 +138,10 @@ class Detection(eqx.Module):
     """Detection settings: sensor noise, rates, contrast, polar sampling, the sigma rule's coefficients
     and the default sigmas of an aim without a detection (:func:`omnijax.aiming.detection_sigmas`).
 
-    The sigma rule: a detection's sigma is ``sqrt((sigma_gain * detector's)^2 + sigma_extra^2)`` per
-    coordinate (``sigma_extra_theta_f`` in rad), fitted by benchmarks/fit_detection_sigmas.py; without
+    The sigma rule: a detection's sigma is ``sqrt((sigma_gain * detector's)^2 + bound^2 + sigma_extra^2
+    + range term^2)`` per coordinate (``sigma_extra_theta_f`` in rad; the range terms
+    ``sigma_extra_r_f_per_m * R`` px and ``sigma_lateral_m / R`` rad at the foot's floor distance ``R``),
+    fitted by benchmarks/fit_detection_sigmas.py; without
     a detection (layout optimiser, calibration points, ``omnijax variance``) ``sigma_r_f`` and
     ``sigma_theta_f`` are used as they are.
 
@@ -166,6 +168,8 @@ class Detection(eqx.Module):
     sigma_extra_r_f: Float[Array, ""] = eqx.field(default=0.0, converter=jnp.asarray)
     sigma_gain_theta_f: Float[Array, ""] = eqx.field(default=1.0, converter=jnp.asarray)
     sigma_extra_theta_f: Float[Array, ""] = eqx.field(default=0.0, converter=jnp.asarray)
+    sigma_extra_r_f_per_m: Float[Array, ""] = eqx.field(default=0.0, converter=jnp.asarray)
+    sigma_lateral_m: Float[Array, ""] = eqx.field(default=0.0, converter=jnp.asarray)
     background_seconds: float = eqx.field(static=True, default=10.0)
     still_s: float = eqx.field(static=True, default=0.3)
     ghost_s: float = eqx.field(static=True, default=0.4)
@@ -503,6 +507,11 @@ class DetectionSection(Section):
     sigma_gain_theta_f: Annotated[float, Field(gt=0, le=100)] = Field(
         1.0, description="sigma rule: factor on the detector's sigma_theta_f")
     sigma_extra_theta_f_deg: SigmaDegrees = Field(0.0, description="sigma rule: independent azimuth error, deg")
+    sigma_extra_r_f_per_m: Annotated[float, Field(ge=0, le=1000)] = Field(
+        0.0, description="sigma rule: foot-radius error growing with the foot's floor distance, px per m")
+    sigma_lateral_m: Annotated[float, Field(ge=0, le=10)] = Field(
+        0.0, description="sigma rule: the foot's error across the line of sight, m (an azimuth error of "
+                         "sigma_lateral_m / R at floor distance R)")
     c_min: Annotated[float, within(0.0, MAX_CONTRAST, "a non-centrality per pixel", open_low=True,
                                    why="more than two 8-bit colours' chromaticities can differ by")] = Field(
         4.0, description="smallest person contrast (non-centrality per pixel) x_m holds for")
@@ -833,6 +842,7 @@ def parse_rig(
         sigma_gain_r_f=_a(de.sigma_gain_r_f), sigma_extra_r_f=_a(de.sigma_extra_r_f),
         sigma_gain_theta_f=_a(de.sigma_gain_theta_f),
         sigma_extra_theta_f=_a(math.radians(de.sigma_extra_theta_f_deg)),
+        sigma_extra_r_f_per_m=_a(de.sigma_extra_r_f_per_m), sigma_lateral_m=_a(de.sigma_lateral_m),
         background_seconds=de.background_seconds, still_s=de.still_s, ghost_s=de.ghost_s,
         ghost_edge=de.ghost_edge, absorb_s=de.absorb_s,
         off_floor_m=_a(de.off_floor_m),

@@ -210,7 +210,7 @@ def people_lines(rig: Rig, dets, valid: np.ndarray) -> list[dict]:
     """The per-person objects of ``detections.jsonl`` (r_f, theta_f, the sigma rule's sigmas and the
     detector's own, contrast, run edges, radial extent)."""
     s_r, s_t = (np.asarray(a) for a in detection_sigmas(rig, dets.sigma_r_f, dets.sigma_theta_f, dets.bound_r_f,
-                                                        dets.bound_theta_f))
+                                                        dets.bound_theta_f, dets.r_f))
     return [{"r_f": float(dets.r_f[k]), "theta_f": float(dets.theta_f[k]), "sigma_r_f": float(s_r[k]),
              "sigma_theta_f": float(s_t[k]), "detector_sigma_r_f": float(dets.sigma_r_f[k]),
              "detector_sigma_theta_f": float(dets.sigma_theta_f[k]), "detector_bound_r_f": float(dets.bound_r_f[k]),

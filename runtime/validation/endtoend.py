@@ -601,7 +601,7 @@ def table_row(rig: Rig, name: str, foot, t: Trials, detection_only: bool, paper:
         row["paper_fixed_position"] = _fixed_position(pred_rig, rig, paper)
     b_r, b_th = (np.asarray(a)[f] for a in (d.bound_r_f, d.bound_theta_f))
     used_r, used_th = (np.asarray(a) for a in detection_sigmas(rig, jnp.asarray(s_r), jnp.asarray(s_th),
-                                                               jnp.asarray(b_r), jnp.asarray(b_th)))
+                                                               jnp.asarray(b_r), jnp.asarray(b_th), jnp.asarray(r_f)))
     row["diagnosis"] = {
         "sigma_r_f_px": float(np.mean(s_r)), "sigma_r_f_used_px": float(np.mean(used_r)),
         "sigma_theta_f_used_rad": float(np.mean(used_th)), "r_f_sd_px": float(np.std(e_r, ddof=1)),

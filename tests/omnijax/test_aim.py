@@ -22,7 +22,7 @@ from omnijax import (
     detection_sigmas,
     floor_from_detections,
 )
-from omnijax.geometry import floor_measurement, floor_to_image
+from omnijax.geometry import floor_measurement, floor_radius, floor_to_image
 from omnijax.zoom import ZOOM_RULES
 
 # Floor points (m) with covariances (m^2: XX, XY, YY) and what main's loop (`aim_at_floor` in
@@ -91,10 +91,11 @@ def _sigma_defaults(rig):
 # The sigma rule
 
 
-def _with_rule(rig, gain_r, extra_r, gain_t, extra_t):
+def _with_rule(rig, gain_r, extra_r, gain_t, extra_t, per_m=0.0, lateral_m=0.0):
     return eqx.tree_at(lambda r: (r.detection.sigma_gain_r_f, r.detection.sigma_extra_r_f,
-                                  r.detection.sigma_gain_theta_f, r.detection.sigma_extra_theta_f),
-                       rig, tuple(jnp.asarray(v, float) for v in (gain_r, extra_r, gain_t, extra_t)))
+                                  r.detection.sigma_gain_theta_f, r.detection.sigma_extra_theta_f,
+                                  r.detection.sigma_extra_r_f_per_m, r.detection.sigma_lateral_m),
+                       rig, tuple(jnp.asarray(v, float) for v in (gain_r, extra_r, gain_t, extra_t, per_m, lateral_m)))
 
 
 def test_sigma_rule_scales_the_detectors_sigmas_and_adds_the_extra_term(paper_rig):
@@ -112,11 +113,33 @@ def test_sigma_rule_scales_the_detectors_sigmas_and_adds_the_extra_term(paper_ri
                                rtol=1e-12)
 
 
+def test_sigma_rule_range_terms_grow_the_radius_far_and_the_azimuth_near(paper_rig):
+    """With a detection's r_f, sigma_r_f gains ``per_m * R`` and sigma_theta_f ``lateral / R`` in quadrature,
+    R its foot's floor distance by eq 1 (at least min_floor_radius); without r_f, neither."""
+    rig = _with_rule(paper_rig, 1.5, 0.4, 2.0, 0.003, per_m=0.8, lateral_m=0.01)
+    r_f = jnp.array([2.0, 60.0, 140.0])
+    s_r, s_t = jnp.array([1.0, 1.0, 1.0]), jnp.array([0.01, 0.01, 0.01])
+    got_r, got_t = detection_sigmas(rig, s_r, s_t, 0.0, 0.0, r_f)
+    o = rig.omni
+    R = np.maximum(np.asarray(floor_radius(r_f, o.r_m, o.H_o, o.profile)[0]), float(rig.detection.min_floor_radius))
+    assert R[0] == float(rig.detection.min_floor_radius) and R[2] > 2.0  # under the camera: clamped
+    np.testing.assert_allclose(np.asarray(got_r), np.sqrt(1.5**2 + 0.4**2 + (0.8 * R) ** 2), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(got_t), np.sqrt(0.02**2 + 0.003**2 + (0.01 / R) ** 2), rtol=1e-12)
+    assert np.all(np.diff(np.asarray(got_r)) > 0) and np.all(np.diff(np.asarray(got_t)) < 0)
+    no_r, no_t = detection_sigmas(rig, s_r, s_t)
+    np.testing.assert_allclose(np.asarray(no_r), np.hypot(1.5, 0.4), rtol=1e-12)
+    # the tracker's measurements carry them
+    _, cov = floor_from_detections(rig, r_f, jnp.zeros(3), s_r, s_t)
+    _, cov0 = floor_measurement(rig, r_f, jnp.zeros(3), got_r, got_t)
+    np.testing.assert_allclose(np.asarray(cov), np.asarray(cov0), rtol=1e-12)
+
+
 def test_the_rig_files_carry_fitted_coefficients(paper_rig):
     """configs/paper.toml holds the coefficients benchmarks/fit_detection_sigmas.py fitted (not the
     schema's identity defaults), and a detector's sigmas are never reduced below the extra term."""
     d = paper_rig.detection
     assert float(d.sigma_gain_theta_f) != 1.0 and float(d.sigma_extra_r_f) > 0
+    assert float(d.sigma_extra_r_f_per_m) > 0 and float(d.sigma_lateral_m) > 0
     s_r, s_t = detection_sigmas(paper_rig, jnp.zeros(3), jnp.zeros(3))
     assert np.all(np.asarray(s_r) == float(d.sigma_extra_r_f))
     assert np.all(np.asarray(s_t) == float(d.sigma_extra_theta_f))
@@ -135,7 +158,7 @@ def test_floor_measurements_use_the_sigma_rule(paper_rig):
 
 def test_a_detection_is_aimed_with_the_rule_sigmas(paper_rig):
     d_r, d_t = _sigma_defaults(paper_rig)
-    s_r, s_t = detection_sigmas(paper_rig, 0.0, 3.0 * d_t)
+    s_r, s_t = detection_sigmas(paper_rig, 0.0, 3.0 * d_t, 0.0, 0.0, 100.0)  # the range terms at r_f = 100 px
     a = aim_detection(paper_rig, 100.0, 0.7, 0.0, 3.0 * d_t)
     b = aim_from_image(paper_rig, 100.0, 0.7, jnp.diag(jnp.stack([s_r**2, s_t**2])))
     np.testing.assert_array_equal(np.asarray(a.covariance.cov), np.asarray(b.covariance.cov))

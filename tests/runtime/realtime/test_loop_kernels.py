@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from omnijax import learn_background, line_background
-from omnijax.geometry import floor_measurement
+from omnijax.geometry import floor_measurement, floor_radius
 from runtime.realtime.loop import perceive
 from tests.omnijax.test_detection import _noisy, _paint_person, _textured
 
@@ -39,9 +39,13 @@ def test_perceive_measures_the_detections_on_the_floor_with_the_sigma_rule(paper
     step_r = float(hyp_r_f[i + 1] - hyp_r_f[i])  # within one hypothesis of the painted one
     assert r_f == pytest.approx(float(hyp_r_f[i]), abs=1.01 * step_r)
     d = paper_rig.detection
-    # the rule: the detector's sigmas scaled by the rig's gains, widened by its extra terms
-    s_r = math.hypot(float(d.sigma_gain_r_f) * float(dets.sigma_r_f[k]), float(d.sigma_extra_r_f))
-    s_t = math.hypot(float(d.sigma_gain_theta_f) * float(dets.sigma_theta_f[k]), float(d.sigma_extra_theta_f))
+    # the rule: the detector's sigmas scaled by the rig's gains, widened by its extra and range terms
+    o = paper_rig.omni
+    R_f = max(float(floor_radius(r_f, o.r_m, o.H_o, o.profile)[0]), float(d.min_floor_radius))
+    s_r = math.hypot(float(d.sigma_gain_r_f) * float(dets.sigma_r_f[k]), float(d.sigma_extra_r_f),
+                     float(d.sigma_extra_r_f_per_m) * R_f)
+    s_t = math.hypot(float(d.sigma_gain_theta_f) * float(dets.sigma_theta_f[k]), float(d.sigma_extra_theta_f),
+                     float(d.sigma_lateral_m) / R_f)
     assert s_t > float(dets.sigma_theta_f[k])
     z0, R0 = floor_measurement(paper_rig, r_f, th, s_r, s_t)
     np.testing.assert_allclose(np.asarray(z[k]), np.asarray(z0), rtol=1e-12)
