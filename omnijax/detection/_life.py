@@ -32,9 +32,7 @@ frame (:func:`live_step`, two jitted calls), after detection, with the frame's d
    changed: +1 for each frame it lies in a ghost's region, -1 for each frame it lies in a person's
    (a detection with a person's edge), none while no detection claims it or gives no verdict; a
    ghost's evidence flickers about the threshold from frame to frame, and a run of ghost frames
-   would be broken by each flicker. The count goes below 0 (to :data:`PERSON_MEMORY` ``ghost_frames``):
-   a sample that showed a person stands a few frames of a ghost's verdict (a passer-by in front
-   of a stander hides the sides the evidence reads).
+   would be broken by each flicker.
    A sample the learning left unsettled (kept in fewer than two thirds of its frames: someone
    stood there through a third of them) is repaired after :data:`UNSETTLED_VOTES` such frames when
    the ghost shows both signs (an edge in the background, none now): the ghosts of the learning.
@@ -86,9 +84,6 @@ RELIGHT_RATE = 0.2
 GHOST_RATIO = 4.0
 #: A sample the learning left unsettled is repaired after this many frames still and in a ghost's region.
 UNSETTLED_VOTES = 2.0
-#: How far below 0 a sample's ghost votes go, in ``ghost_frames``: the frames of a ghost's verdict that a
-#: sample seen in a person's region (changed, with the person's edge) needs first, over the usual.
-PERSON_MEMORY = 3.0
 #: Ghost evidence: the sample inside an edge line lies INNER_PX inside it; the samples outside it
 #: FLANK_PX pixels out.
 INNER_PX, FLANK_PX = 1.5, (3.0, 5.0, 7.0)
@@ -100,7 +95,7 @@ class Life(eqx.Module):
     changed and unchanged from frame to frame), ``rest`` (frames it has been changed and unchanged
     from the frame before since it last was background: a frame it moved holds the count; the
     absorption's), ``ghost`` (frames it has lain, changed, in a ghost's
-    region, net of the frames in a person's, down to -PERSON_MEMORY ghost_frames: the ghost votes)."""
+    region, net of the frames in a person's: the ghost votes)."""
 
     lines: LineBackground
     seen: Float[Array, "T R"]
@@ -279,12 +274,7 @@ def _judge(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: D
     # a vote, not a run: +1 in a ghost's region, -1 in a person's, held where the sample changed and
     # nobody claims it; the evidence of one ghost flickers about the edge threshold from frame to frame
     vote = jnp.where(in_ghost & ~people, 1.0, jnp.where(people, -1.0, 0.0))
-    # the votes go below 0, to PERSON_MEMORY ghost_frames' worth: a sample seen changed in a person's
-    # region (someone standing there, showing their edge) holds that against a few frames of a ghost's
-    # evidence (stops_a_minute 9064: a stander never seen walking in, another person passing in front
-    # at their azimuth, two frames of a ghost's verdict from the sides the passer covered, and the
-    # stander was re-learnt for good); a ghost's samples are never in a person's region while changed
-    ghost = jnp.where(changed, jnp.maximum(life.ghost + vote, -PERSON_MEMORY * rates.ghost_frames), 0.0)
+    ghost = jnp.where(changed, jnp.maximum(life.ghost + vote, 0.0), 0.0)
     # what the learning left unsettled (occupied through a third of its frames or more) holds a ghost
     # of someone who stood there at the learning's start as often as not: repaired on its first votes
     # when the ghost shows both signs (an edge in the background, none now); someone standing there
