@@ -19,8 +19,9 @@ frame (:func:`live_step`, two jitted calls), after detection, with the frame's d
    verdict (:func:`verdicts`) is per side: a ghost needs one side with no edge now and more before,
    and no side with a person's edge (a ghost continues the floor on at least one side, whatever
    adjoins the other). The caller says which detections are trusted people (their tracks walked
-   in): those are ghosts only with both signs (no edge now, an edge :data:`GHOST_RATIO` times
-   stronger before); the others with any more edge before than now. A faint edge now and less
+   in, or have shown a person's edge for a while: :data:`runtime.realtime.perception.PERSON_SEEN_S`):
+   those are ghosts only with both signs (no edge now, an edge :data:`GHOST_RATIO` times stronger
+   before); the others with any more edge before than now. A faint edge now and less
    before (a person of nearly the floor's colour) is no verdict: neither a ghost's vote nor a
    person's. A lamp of another colour switching on a bare floor has about the same (no) edge in
    both, and gets a ghost's vote in about every other frame.
@@ -35,7 +36,8 @@ frame (:func:`live_step`, two jitted calls), after detection, with the frame's d
    would be broken by each flicker.
    A sample the learning left unsettled (kept in fewer than two thirds of its frames: someone
    stood there through a third of them) is repaired after :data:`UNSETTLED_VOTES` such frames when
-   the ghost shows both signs (an edge in the background, none now): the ghosts of the learning.
+   the ghost shows both signs (an edge in the background, none now) and is not a trusted detection:
+   the ghosts of the learning.
 3. **Absorption**: a sample that has changed and stayed at rest for ``absorb_frames`` outside the
    region of every trusted person is learnt as it is now (a chair moved and left, a coat dropped).
    The count at rest (``rest``) is not "still": a frame in which the sample moved (someone passing in
@@ -280,7 +282,10 @@ def _judge(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: D
     # when the ghost shows both signs (an edge in the background, none now); someone standing there
     # now, learnt as the floor, has no edge in the background (and keeps the slow rule)
     unsettled = ~learned(1.0 / life.seen, rates.learn_frames)
-    quick = (unsettled & regions(dets, valid & sure_ghost, shape) & (ghost >= UNSETTLED_VOTES)
+    # (not a detection the caller takes for a person: a stander seen since before the tracker started,
+    # a passer-by in front hiding the sides the evidence reads, was re-learnt on two such frames:
+    # stops_a_minute 9064)
+    quick = (unsettled & regions(dets, valid & sure_ghost & ~trusted, shape) & (ghost >= UNSETTLED_VOTES)
              & (still >= UNSETTLED_VOTES))
     repair = changed & (((ghost >= rates.ghost_frames) & (still >= rates.still_frames)) | quick)
     absorb = changed & (rest >= rates.absorb_frames) & ~protected
