@@ -48,7 +48,9 @@ Two figures of the background's life: ``ghost_gone_s``, the longest a ghost was 
 had walked :data:`LEFT_M` away (from the first processed frame on, for a person who left during the
 learning: per ghost false alarm, the seconds since the last frame anyone stood within LEFT_M of it,
 plus one frame); and ``standing``, how many frames a visible person had stood still for
-:data:`PAUSE_S` or more and in how many of them they were detected.
+:data:`PAUSE_S` or more and in how many of them they were detected (``standing_detected_rate``), and the
+same without the frames of people standing on their spot since before the learning's first frame
+(``standing_detected_rate_seen``: no change detector sees them until they move; standing_start's people).
 
 NEES per matched detection and coordinate: ``(error / sigma)^2`` with the sigma rule's sigma
 (chi-square(1): mean 1, P(> 6.63) = 0.01), overall and per band of the true foot's floor radius
@@ -239,6 +241,9 @@ class PerceptionScore:
     ghost_gone_s: float = 0.0
     standing_frames: int = 0
     standing_detected: int = 0
+    #: the same without the frames of people the learning never saw off their spot (``never_seen_free``)
+    standing_seen_frames: int = 0
+    standing_seen_detected: int = 0
     fa_causes: Counter = field(default_factory=Counter)
     miss_causes: Counter = field(default_factory=Counter)
     nees: list = field(default_factory=list)  # (R_m, nees_r, nees_theta)
@@ -286,9 +291,12 @@ class PerceptionScore:
                 continue
             self.visible += 1
             standing = bool(history is not None and history.still_for(frame, q["id"]) >= PAUSE_S)
+            seen_standing = standing and not history.never_seen_free(frame, q["id"])
             self.standing_frames += standing
+            self.standing_seen_frames += seen_standing
             if c in det_of:
                 self.standing_detected += standing
+                self.standing_seen_detected += seen_standing
                 continue
             self.misses += 1
             cause = self._miss_cause(frame, q, persons, det_of, people, unmatched, history)
@@ -371,6 +379,9 @@ class PerceptionScore:
                 "ghost_gone_s": self.ghost_gone_s, "standing_frames": self.standing_frames,
                 "standing_detected_rate": (self.standing_detected / self.standing_frames
                                            if self.standing_frames else None),
+                "standing_seen_frames": self.standing_seen_frames,
+                "standing_detected_rate_seen": (self.standing_seen_detected / self.standing_seen_frames
+                                                if self.standing_seen_frames else None),
                 "nees": self.nees_figures()}
 
 

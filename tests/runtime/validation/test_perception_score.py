@@ -93,6 +93,28 @@ def test_someone_standing_since_before_the_learning_is_never_seen_free():
     assert s["miss_rate_seen"] == pytest.approx(9 / 9)
 
 
+def test_the_standing_figure_without_those_never_seen_free():
+    """Person 0 stands at (2, 0) from frame 0 (the learning takes frames 1-3: never seen free) and is
+    never detected; person 1 walks in frames 0-1, stands from frame 2 on and is detected in every frame.
+    Standing (still for PAUSE_S = 1 s, the frame itself counted) from frame 9 for person 0, 11 for
+    person 1: over frames 4-19 the standing figure counts both (9 of 20 detected), the seen figure
+    person 1 only (9 of 9)."""
+    T = 20
+    feet = np.zeros((T, 2, 2))
+    feet[:, 0] = [2.0, 0.0]
+    feet[:, 1] = [-2.0, 0.0]
+    moving = np.zeros((T, 2), bool)
+    moving[:2, 1] = True
+    hist = _history(feet, moving, learning=(1, 2, 3))
+    score = PerceptionScore()
+    for f in range(4, T):
+        z = np.array([feet[f, 1]])
+        score.add_frame(f, _truth(f, feet[f]), _people(1), z, np.ones((1, 2)), hist)
+    s = score.summary()
+    assert s["standing_frames"] == 20 and s["standing_detected_rate"] == pytest.approx(9 / 20)
+    assert s["standing_seen_frames"] == 9 and s["standing_detected_rate_seen"] == pytest.approx(1.0)
+
+
 @pytest.mark.parametrize("spectrum, cause", [([0.8, 0.9, 1.0], "shadow"), ([1.0, 0.93, 0.8], "other")])
 def test_a_false_alarm_in_a_coloured_shadow(spectrum, cause):
     """A lamp 3 m up over the origin and a person 1.5 m tall at (1, 0) cast a shadow on the floor from
