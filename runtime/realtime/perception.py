@@ -137,8 +137,12 @@ class BackgroundKeeper:
 
     def warm_up(self, blank, dets, d2) -> None:
         """Compile the life's kernel on a blank frame before anything is timed."""
-        out = live_step(self.detector, self.life, blank, dets, d2, np.zeros(dets.valid.shape, bool), self.rates)
+        trusted = np.zeros(dets.valid.shape, bool)
+        out = live_step(self.detector, self.life, blank, dets, d2, trusted, self.rates)
         jax.block_until_ready(out)
+        # and the person verdicts :meth:`_collect` reads while a track is counted (op by op: compiled at
+        # their first call, which dropped 6 of make demo's first frames)
+        jax.block_until_ready(verdicts(out[1], jnp.asarray(trusted), self.rates.edge))
 
     def trusted(self, tracks: list[Track], slot_of: dict[int, int], K: int) -> np.ndarray:
         """Which of the ``K`` detection slots a track the life takes for a person took (``slot_of``: track
