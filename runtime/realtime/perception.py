@@ -149,15 +149,14 @@ class BackgroundKeeper:
         id -> slot): trusted (:func:`~runtime.realtime.targeting.is_trusted`), or seen with a person's edge
         in :data:`PERSON_SEEN_S` of frames."""
         out = np.zeros(K, bool)
-        self._slots = {}  # the slots whose person verdicts are still counted (none: nothing to read)
+        self._slots = {}
         for tr in tracks:
             k = slot_of.get(tr.id)
             if k is None:
                 continue
+            self._slots[k] = tr.id
             if is_trusted(tr, self.trust) or self.person_frames.get(tr.id, 0) >= self.person_needed:
                 out[k] = True
-            else:
-                self._slots[k] = tr.id
         return out
 
     def update(self, image, dets, d2, trusted: np.ndarray) -> None:
@@ -175,11 +174,10 @@ class BackgroundKeeper:
         g = np.asarray(ghostly)
         self.counts.ghost_detections += int(g.sum())
         self.counts.trusted_ghosts += int((g & trusted).sum())
-        if slots:  # untrusted tracks still counted (0.1 ms on the host; most frames have none)
-            person = np.asarray(verdicts(ev, jnp.asarray(trusted), self.rates.edge)[1]) & np.asarray(valid)
-            for k, track in slots.items():
-                if person[k]:
-                    self.person_frames[track] = self.person_frames.get(track, 0) + 1
+        person = np.asarray(verdicts(ev, jnp.asarray(trusted), self.rates.edge)[1]) & np.asarray(valid)
+        for k, track in slots.items():
+            if person[k]:
+                self.person_frames[track] = self.person_frames.get(track, 0) + 1
         self._pending = None
 
     def learned_share(self) -> float:
