@@ -250,7 +250,8 @@ class Renewal(eqx.Module):
 
 @jax.jit
 def _judge(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: Detections,
-           d2: Float[Array, "T R"], trusted: Bool[Array, " K"], rates: LifeRates) -> tuple[Renewal, Evidence, Array]:
+           d2: Float[Array, "T R"], trusted: Bool[Array, " K"],
+           rates: LifeRates) -> tuple[Renewal, Evidence, Array, Array]:
     """:func:`live_step`'s first half: the detections' evidence and verdicts, and what each sample does."""
     polar = detector.polar
     lines = life.lines
@@ -301,7 +302,8 @@ def _judge(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: D
         relit = change_against(cur, lines.ref, lines.sigma) > CHANGED
         drift = jnp.where(relit, jnp.maximum(drift, RELIGHT_RATE), drift)
     a = jnp.where(free, jnp.where(learning, jnp.maximum(drift, 1.0 / (life.seen + 1.0)), drift), 0.0)
-    return Renewal(cur=cur, fix=fix, free=free, rate=a, still=still, ghost=ghost, rest=rest), ev, ghostly
+    return (Renewal(cur=cur, fix=fix, free=free, rate=a, still=still, ghost=ghost, rest=rest), ev, ghostly,
+            dets.valid & is_person)
 
 
 @jax.jit
@@ -318,17 +320,17 @@ def _renew(life: Life, renewal: Renewal, rates: LifeRates) -> Life:
 
 def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: Detections,
               d2: Float[Array, "T R"], trusted: Bool[ArrayLike, " K"],
-              rates: LifeRates) -> tuple[Life, Evidence, Array]:
+              rates: LifeRates) -> tuple[Life, Evidence, Array, Array]:
     """One frame of the background's life (see the module docstring) after ``dets`` were detected in
     ``frame`` against ``life.lines`` with change ``d2``; ``trusted`` marks the detections the caller
-    knows to be people who walked in. Returns the new life, each detection's evidence, and which
-    detections were judged ghosts.
+    knows to be people who walked in. Returns the new life, each detection's evidence, which
+    detections were judged ghosts, and which (valid ones) were judged people (:func:`verdicts`).
 
     Two compiled calls, what each sample does (:func:`_judge`) then the new life (:func:`_renew`): in
     one, XLA's CPU fusion recomputes every sample's decisions inside the loop of each array of the life
     it writes, three times over in the colour's (1.7 ms a frame on one core against 1.0 ms)."""
-    renewal, ev, ghostly = _judge(detector, life, frame, dets, d2, trusted, rates)
-    return _renew(life, renewal, rates), ev, ghostly
+    renewal, ev, ghostly, person = _judge(detector, life, frame, dets, d2, trusted, rates)
+    return _renew(life, renewal, rates), ev, ghostly, person
 
 
 #: A ghost is set aside (:func:`set_aside_ghosts`) only where one side shows it clearly: no edge now, over

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from omnijax import Rig, build_detector, detection_sigmas, learn_background, line_background
-from omnijax.detection import LifeRates, learned_share, live_step, settle_learning, start_life, verdicts
+from omnijax.detection import LifeRates, learned_share, live_step, settle_learning, start_life
 from runtime.errors import UsageError
 from runtime.realtime.control import perceive
 from runtime.realtime.targeting import GhostSites, TrustRule, is_trusted
@@ -137,12 +137,8 @@ class BackgroundKeeper:
 
     def warm_up(self, blank, dets, d2) -> None:
         """Compile the life's kernel on a blank frame before anything is timed."""
-        trusted = np.zeros(dets.valid.shape, bool)
-        out = live_step(self.detector, self.life, blank, dets, d2, trusted, self.rates)
+        out = live_step(self.detector, self.life, blank, dets, d2, np.zeros(dets.valid.shape, bool), self.rates)
         jax.block_until_ready(out)
-        # and the person verdicts :meth:`_collect` reads while a track is counted (op by op: compiled at
-        # their first call, which dropped 6 of make demo's first frames)
-        jax.block_until_ready(verdicts(out[1], jnp.asarray(trusted), self.rates.edge))
 
     def trusted(self, tracks: list[Track], slot_of: dict[int, int], K: int) -> np.ndarray:
         """Which of the ``K`` detection slots a track the life takes for a person took (``slot_of``: track
@@ -150,6 +146,8 @@ class BackgroundKeeper:
         in :data:`PERSON_SEEN_S` of frames."""
         out = np.zeros(K, bool)
         self._slots = {}
+        alive = {tr.id for tr in tracks}  # the tracker never reuses an id: the counts of gone tracks go
+        self.person_frames = {t: n for t, n in self.person_frames.items() if t in alive}
         for tr in tracks:
             k = slot_of.get(tr.id)
             if k is None:
@@ -163,18 +161,17 @@ class BackgroundKeeper:
         """Dispatch one frame of the life for the frame ``image`` whose detections ``dets`` (device
         arrays) were found with change ``d2`` against :attr:`lines`; ``trusted`` per slot."""
         self._collect()
-        self.life, ev, ghostly = live_step(self.detector, self.life, image, dets, d2, trusted, self.rates)
-        self._pending = (ghostly, trusted, ev, dets.valid, self._slots)
+        self.life, _, ghostly, person = live_step(self.detector, self.life, image, dets, d2, trusted, self.rates)
+        self._pending = (ghostly, trusted, person, self._slots)
         self.counts.frames += 1
 
     def _collect(self) -> None:
         if self._pending is None:
             return
-        ghostly, trusted, ev, valid, slots = self._pending
-        g = np.asarray(ghostly)
+        ghostly, trusted, person, slots = self._pending
+        g, person = np.asarray(ghostly), np.asarray(person)
         self.counts.ghost_detections += int(g.sum())
         self.counts.trusted_ghosts += int((g & trusted).sum())
-        person = np.asarray(verdicts(ev, jnp.asarray(trusted), self.rates.edge)[1]) & np.asarray(valid)
         for k, track in slots.items():
             if person[k]:
                 self.person_frames[track] = self.person_frames.get(track, 0) + 1

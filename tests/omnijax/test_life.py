@@ -46,7 +46,7 @@ def _run(det, life, frames, trusted, rates):
     for f in frames:
         x = jnp.asarray(f)
         dets, trace = detect(det, x, life.lines)
-        life, ev, ghostly = live_step(det, life, x, dets, trace.d2, jnp.full(dets.valid.shape, trusted), rates)
+        life, ev, ghostly, _ = live_step(det, life, x, dets, trace.d2, jnp.full(dets.valid.shape, trusted), rates)
         out.append((np.asarray(dets.valid), np.asarray(ghostly)))
     return life, out, ev
 

@@ -39,3 +39,5 @@ def test_a_track_seen_with_a_persons_edge_is_a_person_to_the_life(paper_rig, pap
         keeper.update(x, dets, trace.d2, trusted)
     assert not track.trusted  # never trusted for targeting: it never moved
     assert said == [False] * (needed + 1) + [True] * 2
+    keeper.trusted([], {}, 8)  # the track is gone: its count goes with it
+    assert keeper.person_frames == {}
