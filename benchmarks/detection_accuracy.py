@@ -84,7 +84,7 @@ def run_scenario(name: str, n_frames: int, measure: str, seed: int, stride: int 
         M = np.asarray(trace.M)
         lines_above += int((M > np.asarray(det.thresholds.lower)).sum())
         n_lines += M.size
-        keeper.update(f.image, d, trace.d2, np.zeros(d.valid.shape, bool))
+        keeper.update(f.image, d, trace, np.zeros(d.valid.shape, bool))
         tr = f.truth
         valid = np.nonzero(np.asarray(d.valid))[0]
         rule_r, rule_t = (np.asarray(a) for a in detection_sigmas(rig, d.sigma_r_f, d.sigma_theta_f, d.bound_r_f,

@@ -36,6 +36,7 @@ from ._detector import (
     line_change as line_change,
     lines_from as lines_from,
     locate_people as locate_people,
+    polar_frame as polar_frame,
     with_zones as with_zones,
 )
 from ._foot import (

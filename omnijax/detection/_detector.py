@@ -152,15 +152,29 @@ def life_candidates(dets: Detections) -> Bool[Array, " K"]:
 
 class DetectionTrace(eqx.Module):
     """Intermediate results, for the background's life, overlays and characterisation: the radial
-    sums ``M`` (eq 8) and d^2 at every polar sample (0 where a sample does not count)."""
+    sums ``M`` (eq 8), d^2 at every polar sample (0 where a sample does not count), the frame at the
+    polar samples (``cur``, float32 RGB), and, once the detections were judged for ghosts before anyone
+    read them (:func:`~omnijax.detection.set_aside_ghosts`), their ghost evidence
+    (:class:`~omnijax.detection.Evidence`; ``None`` until then): the background's life reads both
+    instead of computing them again."""
 
     M: Float[Array, " T"]
     d2: Float[Array, "T R"]
+    cur: Float[Array, "T R 3"]
+    evidence: object = None
 
 
 def line_change(detector: Detector, frame: UInt8[Array, "H W 3"], lines: LineBackground) -> Array:
     """Steps 1-2: d^2 at every polar sample (0 where ``line_ok`` is false)."""
-    cur = gather_rgb(frame, detector.polar.line_index).astype(jnp.float32)
+    return _change_of(detector, polar_frame(detector, frame), lines)
+
+
+def polar_frame(detector: Detector, frame: UInt8[Array, "H W 3"]) -> Float[Array, "T R 3"]:
+    """The frame at the polar samples (float32 RGB)."""
+    return gather_rgb(frame, detector.polar.line_index).astype(jnp.float32)
+
+
+def _change_of(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBackground) -> Array:
     return jnp.where(detector.polar.line_ok, change_at(detector, cur, lines), 0.0)
 
 
@@ -277,6 +291,7 @@ def locate_people(detector: Detector, d2: Float[Array, "T R"], sectors) -> Detec
 def detect(detector: Detector, frame: UInt8[Array, "H W 3"],
            lines: LineBackground) -> tuple[Detections, DetectionTrace]:
     """Steps 1-6 for one frame: every person's foot (r_f, theta_f) with its sigmas."""
-    d2 = line_change(detector, frame, lines)
+    cur = polar_frame(detector, frame)
+    d2 = _change_of(detector, cur, lines)
     M = d2.sum(-1)
-    return locate_people(detector, d2, find_sectors(detector, M)), DetectionTrace(M=M, d2=d2)
+    return locate_people(detector, d2, find_sectors(detector, M)), DetectionTrace(M=M, d2=d2, cur=cur)

@@ -65,6 +65,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, UInt8
 from ._change import AGREE, Background, change_against, change_measure, learned
 from ._detector import (
     Detections,
+    DetectionTrace,
     Detector,
     LineBackground,
     change_at,
@@ -72,6 +73,7 @@ from ._detector import (
     life_candidates,
     lines_from,
     locate_people,
+    polar_frame,
 )
 from ._indexing import gather_rgb
 
@@ -251,14 +253,15 @@ class Renewal(eqx.Module):
 @jax.jit
 def _judge(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: Detections,
            d2: Float[Array, "T R"], trusted: Bool[Array, " K"],
-           rates: LifeRates) -> tuple[Renewal, Evidence, Array, Array]:
+           rates: LifeRates, trace: DetectionTrace | None = None) -> tuple[Renewal, Evidence, Array, Array]:
     """:func:`live_step`'s first half: the detections' evidence and verdicts, and what each sample does."""
     polar = detector.polar
     lines = life.lines
-    cur = gather_rgb(jnp.asarray(frame), polar.line_index).astype(jnp.float32)
+    cur = polar_frame(detector, jnp.asarray(frame)) if trace is None else trace.cur
     ok = polar.line_ok
     changed = (d2 > CHANGED) & ok
-    ev = ghost_evidence(detector, cur, lines, d2, dets)
+    known = trace is not None and trace.evidence is not None
+    ev = trace.evidence if known else ghost_evidence(detector, cur, lines, d2, dets)
     valid = life_candidates(dets)
     sure_ghost, _ = verdicts(ev, jnp.ones_like(trusted), rates.edge)  # both signs, as for the trusted
     # a faint edge now and less before is no verdict: the vote waits (a standing person never seen
@@ -320,16 +323,19 @@ def _renew(life: Life, renewal: Renewal, rates: LifeRates) -> Life:
 
 def live_step(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: Detections,
               d2: Float[Array, "T R"], trusted: Bool[ArrayLike, " K"],
-              rates: LifeRates) -> tuple[Life, Evidence, Array, Array]:
+              rates: LifeRates, trace: DetectionTrace | None = None) -> tuple[Life, Evidence, Array, Array]:
     """One frame of the background's life (see the module docstring) after ``dets`` were detected in
     ``frame`` against ``life.lines`` with change ``d2``; ``trusted`` marks the detections the caller
     knows to be people who walked in. Returns the new life, each detection's evidence, which
     detections were judged ghosts, and which (valid ones) were judged people (:func:`verdicts`).
+    ``trace``, if given (the detection's :class:`~omnijax.detection.DetectionTrace` of this frame),
+    gives the frame at the polar samples and, when the perception step judged the detections already
+    (:func:`set_aside_ghosts`), their evidence: computed once a frame, not again here.
 
     Two compiled calls, what each sample does (:func:`_judge`) then the new life (:func:`_renew`): in
     one, XLA's CPU fusion recomputes every sample's decisions inside the loop of each array of the life
     it writes, three times over in the colour's (1.7 ms a frame on one core against 1.0 ms)."""
-    renewal, ev, ghostly, person = _judge(detector, life, frame, dets, d2, trusted, rates)
+    renewal, ev, ghostly, person = _judge(detector, life, frame, dets, d2, trusted, rates, trace)
     return _renew(life, renewal, rates), ev, ghostly, person
 
 
@@ -345,8 +351,8 @@ ASIDE_BEFORE, ASIDE_RADII = 100.0, 8.0
 ASIDE_MOVED = 0.02
 
 
-def set_aside_ghosts(detector: Detector, frame: UInt8[Array, "H W 3"], lines: LineBackground,
-                     d2: Float[Array, "T R"], dets: Detections, edge, prev: Float[Array, "T R 3"]) -> Detections:
+def set_aside_ghosts(detector: Detector, trace: DetectionTrace, lines: LineBackground, dets: Detections, edge,
+                     prev: Float[Array, "T R 3"]) -> tuple[Detections, DetectionTrace]:
     """``dets`` with the sure ghosts no longer people (``valid``) but left to the background's life to
     judge and repair (as ``strip``). A ghost is the background's error, not someone: before, each was
     reported, tracked and counted for the frames its repair takes (ten at ``ghost_s`` 0.4 s; the ghosts
@@ -356,8 +362,13 @@ def set_aside_ghosts(detector: Detector, frame: UInt8[Array, "H W 3"], lines: Li
     the previous frame at the polar samples, :attr:`Life.prev`; under :data:`ASIDE_MOVED` of its changed
     samples): someone walking off the spot they stood on through the learning is one detection with
     their ghost, their side's edge now no stronger than the background's there (their own, learnt), and
-    was set aside with it (standing_start 9031: 24 frames missed)."""
-    cur = gather_rgb(jnp.asarray(frame), detector.polar.line_index).astype(jnp.float32)
+    was set aside with it (standing_start 9031: 24 frames missed).
+
+    ``trace`` is the frame's detection trace (its d^2 and the frame at the polar samples); returned with
+    the detections' evidence in it, for the background's life (:func:`live_step`) to read. The evidence
+    is of the detections as they were before the set-aside: a sample of another detection in a ghost's
+    region is not counted for it, as the life's own evidence would not count it before."""
+    cur, d2 = trace.cur, trace.d2
     ev = ghost_evidence(detector, cur, lines, d2, dets)
     clear = (ev.edge_now < edge) & (ev.edge_before >= ASIDE_BEFORE) & (ev.samples >= ASIDE_RADII)
     T, R = d2.shape
@@ -368,8 +379,8 @@ def set_aside_ghosts(detector: Detector, frame: UInt8[Array, "H W 3"], lines: Li
     still = count(moved) <= ASIDE_MOVED * count(changed)
     ghost = dets.valid & verdicts(ev, jnp.ones_like(dets.valid), edge)[0] & jnp.any(clear, axis=-1) & still
     strip = ghost if dets.strip is None else dets.strip | ghost
-    return eqx.tree_at(lambda d: (d.valid, d.strip), dets, (dets.valid & ~ghost, strip),
-                       is_leaf=lambda x: x is None)
+    dets = eqx.tree_at(lambda d: (d.valid, d.strip), dets, (dets.valid & ~ghost, strip), is_leaf=lambda x: x is None)
+    return dets, eqx.tree_at(lambda t: t.evidence, trace, ev, is_leaf=lambda x: x is None)
 
 
 #: Fewest learning frames a minority colour must hold to be taken for the floor (a tenth of 30).

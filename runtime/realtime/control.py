@@ -41,8 +41,9 @@ from runtime.realtime import kalman
 def perceive(detector: Detector, rig: Rig, frame, lines, prev=None):
     """Detection (steps 1-6) against the background's polar samples ``lines`` and the detections'
     floor positions with covariances (the aim pipeline's :func:`~omnijax.aiming.floor_from_detections`,
-    under its sigma rule). Returns the detections, their trace (the frame's d^2 for the background's
-    life), the floor points and covariances. A detection whose foot lies more than ``[detection]
+    under its sigma rule). Returns the detections, their trace (the frame's d^2, the frame at the polar
+    samples and, given ``prev``, the detections' ghost evidence: what the background's life reads), the
+    floor points and covariances. A detection whose foot lies more than ``[detection]
     off_floor_m`` outside the room's floor (beyond the outline or inside an excluded zone: a change on
     a wall or on furniture) is no person and is marked invalid; so, given ``prev`` (the previous frame at
     the polar samples, the background's life's), is a sure ghost that has not moved (no edge now, a
@@ -53,7 +54,7 @@ def perceive(detector: Detector, rig: Rig, frame, lines, prev=None):
     on_floor = rig.room.outside_by(z[:, 0], z[:, 1]) <= rig.detection.off_floor_m
     dets = eqx.tree_at(lambda d: d.valid, dets, dets.valid & on_floor)
     if prev is not None:
-        dets = set_aside_ghosts(detector, frame, lines, trace.d2, dets, rig.detection.ghost_edge, prev)
+        dets, trace = set_aside_ghosts(detector, trace, lines, dets, rig.detection.ghost_edge, prev)
     return dets, trace, z, R
 
 
@@ -80,9 +81,10 @@ class Slew(eqx.Module):
 
 
 class Control(eqx.Module):
-    """One frame's result. ``dets`` and ``d2`` (the frame's change at the polar samples, for the
-    background's life); ``z``, ``R`` the detections' floor points and covariances. Tracker:
-    ``assign`` (N,) each slot's detection (-1: none), ``x`` (N, 4), ``P`` (N, 4, 4) after the step.
+    """One frame's result. ``dets`` and ``trace`` (the frame's change at the polar samples and what the
+    background's life reads besides: :class:`~omnijax.detection.DetectionTrace`); ``z``, ``R`` the
+    detections' floor points and covariances. Tracker: ``assign`` (N,) each slot's detection (-1:
+    none), ``x`` (N, 4), ``P`` (N, 4, 4) after the step.
     Aims: ``aim_slot`` (A,) the slots of the confirmed tracks (``aim_ok`` (A,) which entries are
     real); per PTZ and track, ``aims`` their :class:`~omnijax.aiming.Aim` (batched, (K, A)), ``lead``
     (K, A) the prediction horizon (s: that PTZ's command latency and slew time to the track),
@@ -91,7 +93,7 @@ class Control(eqx.Module):
     the head's width in the PTZ's image at that rule's zoom (px)."""
 
     dets: object
-    d2: jax.Array
+    trace: object
     z: jax.Array
     R: jax.Array
     assign: jax.Array
@@ -143,5 +145,5 @@ def control_step(detector: Detector, rig: Rig, frame, lines, slots, t, accel_sd,
         return jax.vmap(functools.partial(one, ptz, slew))(x_new[aim_slot], P_new[aim_slot], R_taken[aim_slot])
 
     aims, lead, floor_sd, face = jax.vmap(camera)(rig.ptz_stack(), slew)
-    return Control(dets=dets, d2=trace.d2, z=z, R=R, assign=assign, x=x_new, P=P_new, aim_slot=aim_slot,
+    return Control(dets=dets, trace=trace, z=z, R=R, assign=assign, x=x_new, P=P_new, aim_slot=aim_slot,
                    aim_ok=aim_ok, aims=aims, lead=lead, floor_sd=floor_sd, face_px=face)

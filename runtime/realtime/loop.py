@@ -250,7 +250,7 @@ class RealTimeLoop:
         blank = jnp.zeros(self.shape, jnp.uint8)
         out = jax.block_until_ready(self._control(blank, 0.0))
         dets = out.dets
-        self.keeper.warm_up(blank, dets, out.d2)
+        self.keeper.warm_up(blank, dets, out.trace)
         for link in self.links:
             link.warm_up()
         if self.assigner is not None:
@@ -383,7 +383,7 @@ class RealTimeLoop:
         if self.counts["frames"] % self.cfg.adapt_every == 0:  # dispatched, not waited for
             where = np.nonzero(valid)[0]
             slot_of = {tr.id: int(where[tr.detection]) for tr in tracker.tracks if tr.detection is not None}
-            self.keeper.update(x, out.dets, out.d2, self.keeper.trusted(tracker.tracks, slot_of, valid.shape[0]))
+            self.keeper.update(x, out.dets, out.trace, self.keeper.trusted(tracker.tracks, slot_of, valid.shape[0]))
         self._record("adapt", t)
         status = self.status()
         status["arrived"] = arrived

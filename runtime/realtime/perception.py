@@ -135,9 +135,10 @@ class BackgroundKeeper:
     def lines(self):
         return self.life.lines
 
-    def warm_up(self, blank, dets, d2) -> None:
-        """Compile the life's kernel on a blank frame before anything is timed."""
-        out = live_step(self.detector, self.life, blank, dets, d2, np.zeros(dets.valid.shape, bool), self.rates)
+    def warm_up(self, blank, dets, trace) -> None:
+        """Compile the life's kernel on a blank frame (its detections and their trace) before anything is timed."""
+        out = live_step(self.detector, self.life, blank, dets, trace.d2, np.zeros(dets.valid.shape, bool), self.rates,
+                        trace)
         jax.block_until_ready(out)
 
     def trusted(self, tracks: list[Track], slot_of: dict[int, int], K: int) -> np.ndarray:
@@ -157,11 +158,14 @@ class BackgroundKeeper:
                 out[k] = True
         return out
 
-    def update(self, image, dets, d2, trusted: np.ndarray) -> None:
+    def update(self, image, dets, trace, trusted: np.ndarray) -> None:
         """Dispatch one frame of the life for the frame ``image`` whose detections ``dets`` (device
-        arrays) were found with change ``d2`` against :attr:`lines`; ``trusted`` per slot."""
+        arrays) were found against :attr:`lines` with ``trace`` (:class:`~omnijax.detection.DetectionTrace`:
+        their change, the frame at the polar samples, their ghost evidence if judged already);
+        ``trusted`` per slot."""
         self._collect()
-        self.life, _, ghostly, person = live_step(self.detector, self.life, image, dets, d2, trusted, self.rates)
+        self.life, _, ghostly, person = live_step(self.detector, self.life, image, dets, trace.d2, trusted,
+                                                  self.rates, trace)
         self._pending = (ghostly, trusted, person, self._slots)
         self.counts.frames += 1
 
@@ -227,7 +231,7 @@ class Perception:
         tracks = self.tracker.step(t, np.asarray(z)[valid], np.asarray(R)[valid])
         self.ghost_sites.update(t, tracks)
         slot_of = {tr.id: int(valid[tr.detection]) for tr in tracks if tr.detection is not None}
-        self.keeper.update(x, dets_d, trace.d2, self.keeper.trusted(tracks, slot_of, len(dets.valid)))
+        self.keeper.update(x, dets_d, trace, self.keeper.trusted(tracks, slot_of, len(dets.valid)))
         return dets, np.asarray(z)[valid], valid, tracks
 
 

@@ -4,12 +4,14 @@ people only, and what the learning could not settle learnt as it is seen free.""
 
 from __future__ import annotations
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from omnijax import detect, learn_background, line_background
-from omnijax.detection import CHANGED, LifeRates, learned, live_step, start_life, verdicts
+from omnijax.detection import CHANGED, LifeRates, ghost_evidence, learned, live_step, start_life, verdicts
 from tests.omnijax.test_detection import _noisy, _paint_person
 
 #: Frames in these tests: a changed sample must stay still STILL frames and lie in a ghost GHOST frames
@@ -335,9 +337,38 @@ def test_a_sure_ghost_is_set_aside_for_the_life_and_a_person_is_not(paper_detect
         frame = jnp.asarray(_noisy(rng, now))
         dets, trace = detect(det, frame, lines)
         assert int(np.asarray(dets.valid).sum()) == 1
-        after = set_aside_ghosts(det, frame, lines, trace.d2, dets, 6.0, polar(_noisy(rng, before)))
+        after, judged = set_aside_ghosts(det, trace, lines, dets, 6.0, polar(_noisy(rng, before)))
         assert int(np.asarray(after.valid).sum()) == (0 if ghost else 1)
         assert np.array_equal(np.asarray(life_candidates(after)), np.asarray(life_candidates(dets)))
+        # the evidence it judged by goes on in the trace, for the life to read instead of computing it again
+        own = ghost_evidence(det, trace.cur, lines, trace.d2, dets)
+        for got, want in zip(jax.tree.leaves(judged.evidence), jax.tree.leaves(own)):
+            np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-6)
+        assert trace.evidence is None and np.array_equal(np.asarray(trace.cur), np.asarray(polar(frame)))
+
+
+def test_the_life_reads_the_evidence_of_the_perception_step(paper_detector, room):
+    """``live_step`` given the frame's trace with the set-aside's evidence in it makes the same life as
+    computing the evidence itself (one person, nothing set aside: the same detections either way); and
+    given some other evidence it uses that (it does not compute its own)."""
+    from omnijax.detection import set_aside_ghosts
+
+    rng, base, person, _ = room
+    det = paper_detector
+    lines = line_background(det, learn_background(np.stack([_noisy(rng, base) for _ in range(20)])))
+    life, rates = start_life(lines), _rates()
+    frame = jnp.asarray(_noisy(rng, person))
+    dets, trace = detect(det, frame, lines)
+    dets, judged = set_aside_ghosts(det, trace, lines, dets, 6.0, life.prev)
+    trusted = jnp.zeros(dets.valid.shape, bool)
+    alone = live_step(det, life, frame, dets, trace.d2, trusted, rates)
+    read = live_step(det, life, frame, dets, trace.d2, trusted, rates, judged)
+    for a, b in zip(jax.tree.leaves(alone), jax.tree.leaves(read)):  # the same to float rounding (two compilations)
+        np.testing.assert_allclose(np.asarray(a, float), np.asarray(b, float), rtol=1e-6)
+    none = jax.tree.map(jnp.zeros_like, judged.evidence)  # no edge anywhere: no verdict
+    _, ev, ghostly, person_seen = live_step(det, life, frame, dets, trace.d2, trusted, rates,
+                                            eqx.tree_at(lambda t: t.evidence, judged, none))
+    assert not np.asarray(person_seen).any() and np.asarray(alone[3]).any()
 
 
 def test_a_person_against_a_table_of_their_colour_is_no_ghost(paper_detector, room):

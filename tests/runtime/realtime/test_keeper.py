@@ -36,7 +36,7 @@ def test_a_track_seen_with_a_persons_edge_is_a_person_to_the_life(paper_rig, pap
         assert len(valid) == 1
         trusted = keeper.trusted([track], {track.id: int(valid[0])}, len(dets.valid))
         said.append(bool(trusted[valid[0]]))
-        keeper.update(x, dets, trace.d2, trusted)
+        keeper.update(x, dets, trace, trusted)
     assert not track.trusted  # never trusted for targeting: it never moved
     assert said == [False] * (needed + 1) + [True] * 2
     keeper.trusted([], {}, 8)  # the track is gone: its count goes with it
