@@ -5,6 +5,9 @@ from ._blobs import (
     People as People,
     find_people as find_people,
     merge_fragments as merge_fragments,
+    own_feet as own_feet,
+    own_lines as own_lines,
+    parted as parted,
     window_count_prefix as window_count_prefix,
     window_sums as window_sums,
 )

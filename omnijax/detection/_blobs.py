@@ -31,7 +31,9 @@ or one behind the other as the camera sees them, and the paper's estimate then f
    fewer than :data:`MIN_RUN_LINES` lines is a strip beside someone, not a person
    (:func:`merge_fragments`, the one place where detections are merged); so are two on the
    innermost foot hypothesis (someone under the camera, whose image fans over a wide angle)
-   within the blind disc's diameter.
+   within the blind disc's diameter. Two whose runs share lines and whose feet from their own lines
+   (those no other run holds) are :data:`MERGE_M` or more apart are two people, one's image over the
+   other's (:func:`parted`): not merged, each with the foot from its own lines.
 """
 
 from __future__ import annotations
@@ -70,6 +72,10 @@ MERGE_M = 0.45
 #: 6201-6203 (six scenes, 600 frames): runs of one line were 11 of 7,300 matched detections and 32
 #: of 270 false alarms (28 of them fragments); docs/detection.md, "A strip is not a person".
 MIN_RUN_LINES = 2
+#: Fewest lines of its own (no other person's run holds them) a person needs for a foot from them
+#: alone (:func:`own_feet`): a body spans at least 5 lines, and one or two lines beside someone else's
+#: run are too little of it.
+OWN_LINES = 3
 #: Lines searched either side of a person's line for its run (the widest person near the axis).
 REACH = 64
 #: A pass after a person whose explained lines number at most NARROW_LINES recomputes a band that
@@ -298,6 +304,56 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     state = (jnp.asarray(1), d2, explained, fig, people, rec["valid"])
     people = jax.lax.while_loop(lambda s: (s[0] < max_people) & s[5], body, state)[4]
     return People(**people)
+
+
+def _runs(people: People, T: int) -> tuple[Array, Array]:
+    """Per person, its run's lines (K, T), and the same for those whose run has at least
+    :data:`MIN_RUN_LINES` lines (a strip of one line is no one's)."""
+    line = jnp.arange(T)
+    runs = people.valid[:, None] & ((line[None] - people.first[:, None]) % T <= (people.last - people.first)[:, None])
+    return runs, runs & (people.last - people.first + 1 >= MIN_RUN_LINES)[:, None]
+
+
+def own_lines(people: People, T: int) -> Bool[Array, "K T"]:
+    """Per person, the lines of its run that no other person's run (of at least :data:`MIN_RUN_LINES`
+    lines) holds."""
+    runs, whole = _runs(people, T)
+    others = jnp.sum(whole, 0)[None] - whole  # runs of the others holding each line
+    return runs & (others == 0)
+
+
+def own_feet(polar: PolarIndex, d2: Float[Array, "T R"], people: People) -> tuple[Array, Array]:
+    """Each person's foot hypothesis from its own lines alone (:func:`own_lines`): eq 12 (corrected) on
+    the sum of ``d2`` over them; and whether it has one (its run shares lines with another person's, and
+    it has at least :data:`OWN_LINES` lines of its own)."""
+    T = polar.n_theta
+    own = own_lines(people, T)
+    _, whole = _runs(people, T)
+    w = whole.astype(d2.dtype)
+    shares = jnp.any((w @ w.T > 0) & ~jnp.eye(w.shape[0], dtype=bool), 1)
+    P = _prefix(own.astype(d2.dtype) @ d2)  # (K, R + 1)
+    eq12 = jnp.where(polar.hyp_ok[None], 2 * (P[:, polar.hyp_out] - P[:, :-1]) - P[:, -1:], -jnp.inf)
+    return argmax_rows(eq12), shares & (jnp.sum(own, 1) >= OWN_LINES)
+
+
+def parted(valid: Bool[Array, " K"], floor_xy: Float[Array, "K 2"], own_xy: Float[Array, "K 2"],
+           has_own: Bool[Array, " K"]) -> Bool[Array, "K K"]:
+    """Pairs of valid people whose feet are within :data:`MERGE_M` on the floor but whose feet from
+    their own lines (``own_xy``, where ``has_own``: :func:`own_feet`) are :data:`MERGE_M` or more apart:
+    two people whose images overlap in azimuth, not one person's fragments.
+
+    One nearer the camera and the other farther out a few degrees aside share most of their lines; the
+    run of the first found holds both, and the foot on its centre line falls between them, near enough
+    the other's to merge it away: stops_a_minute 9078's two standers, 1.25 and 1.81 m out and 8
+    degrees apart, had their feet placed 0.41 m apart and the nearer one was merged away in 199
+    person-frames (docs/detection.md, "merged people"). The lines only one of them covers show each
+    alone. Used only to part a pair the merge would join: a person's own lines are few and at the edge
+    of their body, and their foot from those alone is worse than the centre line's where nothing
+    overlaps (six_people 6202: 3.06 m placed at 4.18 m)."""
+    near = jnp.linalg.norm(floor_xy[:, None] - floor_xy[None], axis=-1) < MERGE_M
+    apart = jnp.linalg.norm(own_xy[:, None] - own_xy[None], axis=-1) >= MERGE_M
+    both = valid & has_own
+    return both[:, None] & both[None] & near & apart
 
 
 def merge_fragments(valid: Bool[Array, " K"], floor_xy: Float[Array, "K 2"], innermost: Bool[Array, " K"] | None = None,

@@ -26,7 +26,7 @@ from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray, UInt8
 from ..camera import OmniCamera
 from ..config import Rig
 from ..geometry import wrap_2pi
-from ._blobs import MIN_RUN_LINES, People, find_people, merge_fragments
+from ._blobs import MIN_RUN_LINES, People, find_people, merge_fragments, own_feet, parted
 from ._change import MEASURES, Background, ReferenceTerms, change_across_light, change_against, reference_terms
 from ._foot import FootSigmaTable, build_foot_sigma_table, foot_sigma_lookup
 from ._indexing import Thresholds, build_thresholds, gather_rgb, hysteresis_sectors
@@ -253,18 +253,22 @@ def sector_lines(sectors, n_theta: int) -> Bool[Array, " T"]:
     return jnp.any(sectors.valid[:, None] & (rel <= (sectors.last - sectors.first)[:, None]), 0)
 
 
-def detections_of(detector: Detector, people: People) -> Detections:
-    """The :class:`Detections` of :func:`~omnijax.detection.find_people`'s people: feet, sigmas,
-    edges; fragments merged (:func:`~omnijax.detection.merge_fragments`)."""
+def detections_of(detector: Detector, people: People, d2: Float[Array, "T R"]) -> Detections:
+    """The :class:`Detections` of :func:`~omnijax.detection.find_people`'s people (found in the frame's
+    polar ``d2``): feet, sigmas, edges; fragments merged (:func:`~omnijax.detection.merge_fragments`),
+    but two people whose images overlap parted (:func:`~omnijax.detection.parted`), each with its foot
+    from its own lines."""
     polar = detector.polar
     step = 2 * jnp.pi / polar.n_theta
-    i = people.i
+    theta_f = wrap_2pi(people.centre * step)
+    floor = lambda i: polar.hyp_R[i][:, None] * jnp.stack([jnp.cos(theta_f), jnp.sin(theta_f)], -1)
+    i_own, has_own = own_feet(polar, d2, people)
+    two = parted(people.valid, floor(people.i), floor(i_own), has_own)
+    i = jnp.where(jnp.any(two, 1), i_own, people.i)
     width = (people.last - people.first + 1) * step
     sigma_r, sigma_theta, bound_r, bound_theta = _foot_sigmas(detector, i, people.contrast, width, people.visible)
-    theta_f = wrap_2pi(people.centre * step)
-    R = polar.hyp_R[i]
     first = polar.hyp_first
-    xy = jnp.stack([R * jnp.cos(theta_f), R * jnp.sin(theta_f)], -1)
+    xy = floor(i)
     run = people.last - people.first + 1
     valid = merge_fragments(people.valid, xy, i == first, polar.hyp_R[first], run)
     strip = merge_fragments(people.valid, xy, i == first, polar.hyp_R[first]) & (run < MIN_RUN_LINES)
@@ -284,7 +288,7 @@ def locate_people(detector: Detector, d2: Float[Array, "T R"], sectors) -> Detec
     ok = polar.line_ok.astype(d2.dtype)
     people = find_people(polar, d2, ok, sector_lines(sectors, polar.n_theta), th.window, th.c_min,
                          detector.dof_per_sample, detector.sigma_H_p, detector.max_people)
-    return detections_of(detector, people)
+    return detections_of(detector, people, d2)
 
 
 @jax.jit

@@ -314,6 +314,53 @@ def test_a_strip_of_one_line_is_not_a_person(paper_detector):
     assert found(list(range(100, 100 + width))) == 1
 
 
+def test_two_people_whose_images_overlap_in_azimuth_are_parted_not_merged(paper_detector):
+    """stops_a_minute 9078's two standers on a table of d^2: one 1.25 m out, the other 1.81 m out and 8
+    degrees aside, their images overlapping over most of their lines, found as the people stage found
+    them there: the farther one's run holding both, its centre line's foot between them (1.52 m), the
+    nearer one's near its own (1.11 m), 0.41 m apart. The merge took the nearer one for a fragment
+    (199 person-frames of that seed); their feet from their own lines part them, and each gets that
+    foot. One person found twice (a strip of their own image beside their run) is still merged."""
+    from omnijax.detection import People
+    from omnijax.detection._detector import detections_of
+
+    det = paper_detector
+    polar = det.polar
+    ok = np.asarray(polar.line_ok, np.float32)
+    R, T = np.asarray(polar.hyp_R), polar.n_theta
+    step = 2 * np.pi / T
+    at = lambda metres: int(np.argmin(np.abs(R - metres)))
+
+    def person(d2, i, deg, value):
+        half = 0.5 * float(polar.hyp_width[i]) / step
+        lines = np.arange(int(np.round(deg / 360 * T - half)), int(np.round(deg / 360 * T + half)) + 1) % T
+        d2[np.ix_(lines, np.arange(i, int(polar.hyp_out[i])))] += value
+
+    def people(rows):  # (i, first, last): valid, strongest first
+        K = det.max_people
+        pad = lambda v, fill: jnp.asarray(list(v) + [fill] * (K - len(v)))
+        i, first, last = (pad([r[k] for r in rows], 0) for k in range(3))
+        return People(valid=pad([True] * len(rows), False), i=i, centre=0.5 * (first + last).astype(float),
+                      first=first, last=last, contrast=jnp.full(K, 100.0), excess=jnp.full(K, 1e4),
+                      support=jnp.ones(K), visible=jnp.ones(K), explained=jnp.zeros((K, 4), jnp.int32))
+
+    def feet(d2, rows):
+        d = detections_of(det, people(rows), jnp.asarray(d2 * ok))
+        valid = np.flatnonzero(np.asarray(d.valid))
+        return sorted(float(R[int(np.argmin(np.abs(np.asarray(polar.hyp_r_f) - float(d.r_f[k]))))]) for k in valid)
+
+    d2 = 2.0 * ok
+    person(d2, at(1.25), 357.5, 60.0)
+    person(d2, at(1.81), 5.6, 120.0)
+    got = feet(d2, [(at(1.52), -6, 13), (at(1.11), -13, 8)])  # the runs and feet of 9078's frame 1465
+    assert len(got) == 2, got
+    assert got[0] == pytest.approx(R[at(1.25)], abs=0.12) and got[1] == pytest.approx(R[at(1.81)], abs=0.12)
+
+    one = 2.0 * ok  # the farther one alone, found twice: their run, and a strip of 4 of its lines past it
+    person(one, at(1.81), 5.6, 120.0)
+    assert len(feet(one, [(at(1.81), -2, 12), (at(1.70), 10, 14)])) == 1
+
+
 @pytest.mark.parametrize("layout", ["side by side", "one behind the other"])
 def test_two_people_in_one_sector_are_two_detections(paper_detector, painted, layout):
     """Two painted people in one psi1 sector (the paper's detector finds one foot there): side by side,
