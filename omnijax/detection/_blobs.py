@@ -46,6 +46,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
+from ._foot import foot_scores
 from ._polar import PolarIndex
 
 #: A person's contrast over its unexplained samples must reach CONTRAST_FACTOR x ``c_min``.
@@ -306,6 +307,11 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     return People(**people)
 
 
+def _distances(xy: Float[Array, "K 2"]) -> Float[Array, "K K"]:
+    """Floor distances between every two detections' feet."""
+    return jnp.linalg.norm(xy[:, None] - xy[None], axis=-1)
+
+
 def _runs(people: People, T: int) -> tuple[Array, Array]:
     """Per person, its run's lines (K, T), and the same for those whose run has at least
     :data:`MIN_RUN_LINES` lines (a strip of one line is no one's)."""
@@ -326,13 +332,11 @@ def own_feet(polar: PolarIndex, d2: Float[Array, "T R"], people: People) -> tupl
     """Each person's foot hypothesis from its own lines alone (:func:`own_lines`): eq 12 (corrected) on
     the sum of ``d2`` over them; and whether it has one (its run shares lines with another person's, and
     it has at least :data:`OWN_LINES` lines of its own)."""
-    T = polar.n_theta
-    own = own_lines(people, T)
-    _, whole = _runs(people, T)
-    w = whole.astype(d2.dtype)
-    shares = jnp.any((w @ w.T > 0) & ~jnp.eye(w.shape[0], dtype=bool), 1)
-    P = _prefix(own.astype(d2.dtype) @ d2)  # (K, R + 1)
-    eq12 = jnp.where(polar.hyp_ok[None], 2 * (P[:, polar.hyp_out] - P[:, :-1]) - P[:, -1:], -jnp.inf)
+    runs, whole = _runs(people, polar.n_theta)
+    others = jnp.sum(whole, 0)[None] - whole
+    own = runs & (others == 0)  # own_lines, from the same runs
+    shares = jnp.any(whole & (others > 0), 1)
+    eq12 = jax.vmap(foot_scores, in_axes=(0, None))(own.astype(d2.dtype) @ d2, polar)
     return argmax_rows(eq12), shares & (jnp.sum(own, 1) >= OWN_LINES)
 
 
@@ -350,8 +354,7 @@ def parted(valid: Bool[Array, " K"], floor_xy: Float[Array, "K 2"], own_xy: Floa
     alone. Used only to part a pair the merge would join: a person's own lines are few and at the edge
     of their body, and their foot from those alone is worse than the centre line's where nothing
     overlaps (six_people 6202: 3.06 m placed at 4.18 m)."""
-    near = jnp.linalg.norm(floor_xy[:, None] - floor_xy[None], axis=-1) < MERGE_M
-    apart = jnp.linalg.norm(own_xy[:, None] - own_xy[None], axis=-1) >= MERGE_M
+    near, apart = _distances(floor_xy) < MERGE_M, _distances(own_xy) >= MERGE_M
     both = valid & has_own
     return both[:, None] & both[None] & near & apart
 
@@ -366,7 +369,7 @@ def merge_fragments(valid: Bool[Array, " K"], floor_xy: Float[Array, "K 2"], inn
     the disc's diameter."""
     if run_lines is not None:
         valid = valid & (run_lines >= MIN_RUN_LINES)
-    d = jnp.linalg.norm(floor_xy[:, None] - floor_xy[None], axis=-1)
+    d = _distances(floor_xy)
     idx = jnp.arange(valid.shape[0])
     near = d < MERGE_M
     if innermost is not None:
