@@ -230,22 +230,30 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
         eq12 = jnp.where(polar.hyp_ok[None], 2 * (PQ[:, out] - PQ[:, :-1]) - PQ[:, -1:], -jnp.inf)
         i_line = argmax_rows(eq12)
         o_line = out[i_line]
-        n_span = _span(n_all[lines], i_line, o_line)
-        n_line = jnp.maximum(n_span, 1.0)
-        if explained is None:  # every sample unexplained: the window's samples that count (whole numbers)
-            vis_line = n_span
-        else:
-            vis_line = _span(_prefix(_windows((ok * (1.0 - explained))[rows], half, reach, B)), i_line, o_line)
-        excess = _span(PQ, i_line, o_line) - dps * n_line  # explained samples hold exactly dps
-        contrast = excess / jnp.maximum(vis_line, 1.0)
-        support = _span(_prefix((Q > window[None]).astype(jnp.float32)), i_line, o_line) / jnp.maximum(
-            o_line - i_line, 1)
-        return lines, (i_line, n_line, vis_line, excess, contrast, support)
+        h_line = polar.hyp_head[i_line]
+        n_prefix = n_all[lines]
+        vis_prefix = n_prefix if explained is None else _prefix(_windows((ok * (1.0 - explained))[rows], half, reach, B))
+        sig_prefix = _prefix((Q > window[None]).astype(jnp.float32))
+
+        def part(a):
+            """Over radii ``a .. o_line``: the samples, excess, contrast over the unexplained samples
+            (explained ones hold exactly dps) and support."""
+            n = jnp.maximum(_span(n_prefix, a, o_line), 1.0)
+            vis = _span(vis_prefix, a, o_line)
+            excess = _span(PQ, a, o_line) - dps * n
+            support = _span(sig_prefix, a, o_line) / jnp.maximum(o_line - a, 1)
+            return n, vis, excess, excess / jnp.maximum(vis, 1.0), support
+
+        n_line, vis_line, excess, contrast, support = part(i_line)
+        _, _, _, head_contrast, head_support = part(h_line)
+        return lines, (i_line, n_line, vis_line, excess, contrast, support, head_contrast, head_support)
 
     def pick(d2, explained, fig):
         """The next person from every line's figures ``fig``; ``d2`` and ``explained`` with them explained."""
-        i_line, n_line, vis_line, excess, contrast, support = fig
-        person = candidate & (contrast >= CONTRAST_FACTOR * c_min) & (support >= SUPPORT)
+        i_line, n_line, vis_line, excess, contrast, support, head_contrast, head_support = fig
+        whole = (contrast >= CONTRAST_FACTOR * c_min) & (support >= SUPPORT)
+        head = (head_contrast >= CONTRAST_FACTOR * c_min) & (head_support >= SUPPORT)
+        person = candidate & (whole | head)
         score = jnp.where(person, excess, -jnp.inf)
         t0 = jnp.argmax(score)
         found = jnp.isfinite(score[t0])

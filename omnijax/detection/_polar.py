@@ -11,8 +11,9 @@ Built once per rig (NumPy-free, but not traced: sizes come out of the geometry):
   person there (``window_lines``; the window sums the polar samples of those lines,
   :func:`omnijax.detection.window_sums`), and the samples in it (``window_n``);
 - foot hypotheses: for each inner end ``i`` of a person along a line, the index just
-  past its outer end, the image radius of its axis foot (what eq 1 turns into R_p), that
-  floor radius R_p (m) and the person's azimuth span there;
+  past its outer end, the index where its head and neck begin (the shoulders, on its axis), the
+  image radius of its axis foot (what eq 1 turns into R_p), that floor radius R_p (m) and the
+  person's azimuth span there;
 - the rig's *ignore* zones (``[[zones]]``, :mod:`omnijax.config`): line samples inside them are
   left out like repeats (``line_ok``), so that nothing is detected there and a line's
   chi-square counts only the samples left.
@@ -29,7 +30,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from ..config import ConfigError, Rig, zone_mask
-from ..geometry import floor_radius, person_image_extent, point_image_radius
+from ..geometry import SHOULDER, floor_radius, person_image_extent, point_image_radius
 
 #: Fewest pixels of radius the polar sampling needs (a person's profile along a line).
 MIN_POLAR_SPAN_PX = 8
@@ -46,6 +47,9 @@ class PolarIndex(eqx.Module):
     window_lines: Int[Array, " R"]
     window_n: Float[Array, " R"]
     hyp_out: Int[Array, " R"]
+    #: per foot hypothesis, the index where the head and neck begin (the shoulders on the axis):
+    #: ``hyp_head .. hyp_out`` is what is left of a person dressed like the floor
+    hyp_head: Int[Array, " R"]
     hyp_ok: Bool[Array, " R"]
     hyp_r_f: Float[Array, " R"]
     hyp_R: Float[Array, " R"]
@@ -124,8 +128,9 @@ def _range_radii(rig: Rig, R_far):
 
 @jax.jit
 def _geometry_tables(rig: Rig, radii, theta):
-    """Pixels of the line samples; per radius: floor radius, and the outer end and axis-foot
-    radius of a person whose inner end, as the psi2 window sees it, is there.
+    """Pixels of the line samples; per radius: floor radius, and the outer end, the shoulders (on
+    the axis) and the axis-foot radius of a person whose inner end, as the psi2 window sees it, is
+    there.
 
     Two distances from the inner end to the axis. The person's image as the window sees it (its
     outer end, its azimuth span) is that of a body whose round base starts, on average over the
@@ -145,7 +150,8 @@ def _geometry_tables(rig: Rig, radii, theta):
     width = 2 * jnp.arcsin(jnp.minimum(rho / R_seen, 1.0))  # a vertical cylinder's azimuth span
     R_axis = R_floor + rho
     r_f = point_image_radius(R_axis, 0.0, omni.r_m, omni.H_o, omni.profile)
-    return x, y, R_floor, r_out, r_f, dout_dH, width, R_axis
+    r_head = point_image_radius(R_axis, SHOULDER * rig.person.H_p, omni.r_m, omni.H_o, omni.profile)
+    return x, y, R_floor, r_out, r_head, r_f, dout_dH, width, R_axis
 
 
 def build_polar_index(rig: Rig) -> PolarIndex:
@@ -158,7 +164,7 @@ def build_polar_index(rig: Rig) -> PolarIndex:
     theta = 2 * np.pi * np.arange(det.n_theta) / det.n_theta
 
     tables = _geometry_tables(rig, jnp.asarray(radii), jnp.asarray(theta))
-    x, y, R_floor, r_out, hyp_r_f, dout_dH, hyp_width, hyp_R = (np.asarray(v) for v in tables)
+    x, y, R_floor, r_out, r_head, hyp_r_f, dout_dH, hyp_width, hyp_R = (np.asarray(v) for v in tables)
     xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
     inside = (xi >= 0) & (xi < W_img) & (yi >= 0) & (yi < H_img)
     flat = np.where(inside, yi * W_img + xi, 0)
@@ -175,6 +181,7 @@ def build_polar_index(rig: Rig) -> PolarIndex:
 
     hyp_out = np.ceil(r_out - r_min).astype(np.int64)
     hyp_ok = (hyp_out <= n_r) & (hyp_out > np.arange(n_r))
+    hyp_head = np.clip(np.floor(r_head - r_min).astype(np.int64), np.arange(n_r), np.maximum(hyp_out - 1, 0))
     from ._blobs import window_count_prefix  # the psi2 window's one definition
 
     window_lines_j = jnp.asarray(window_lines, dtype=jnp.int32)
@@ -184,7 +191,8 @@ def build_polar_index(rig: Rig) -> PolarIndex:
         samples=jnp.asarray(line_ok.sum(1), dtype=float),
         window_lines=window_lines_j, window_n=jnp.asarray(2.0 * window_lines + 1),
         window_ok_prefix=window_count_prefix(jnp.asarray(line_ok), window_lines_j, int(window_lines.max())),
-        hyp_out=jnp.asarray(np.minimum(hyp_out, n_r), dtype=jnp.int32), hyp_ok=jnp.asarray(hyp_ok),
+        hyp_out=jnp.asarray(np.minimum(hyp_out, n_r), dtype=jnp.int32),
+        hyp_head=jnp.asarray(np.minimum(hyp_head, n_r), dtype=jnp.int32), hyp_ok=jnp.asarray(hyp_ok),
         hyp_r_f=jnp.asarray(hyp_r_f), hyp_R=jnp.asarray(hyp_R), hyp_dout_dH=jnp.asarray(dout_dH),
         hyp_width=jnp.asarray(hyp_width), image_size=(W_img, H_img), window_reach=int(window_lines.max()),
         person_half_lines=float(0.5 * hyp_width[hyp_ok].max() * det.n_theta / (2 * np.pi)) if hyp_ok.any() else 0.0,
