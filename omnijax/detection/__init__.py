@@ -3,6 +3,7 @@ and their feet (eq 5-12)."""
 
 from ._blobs import (
     People as People,
+    a_person as a_person,
     find_people as find_people,
     merge_fragments as merge_fragments,
     own_feet as own_feet,

@@ -53,6 +53,15 @@ from ._polar import PolarIndex
 CONTRAST_FACTOR = 2.0
 #: Share of a person's radii whose psi2 profile must be significant.
 SUPPORT = 0.25
+#: A person dressed like the floor changes only their neck and head (``hyp_head .. hyp_out``, about a
+#: third of their radii): found by those alone when their contrast there reaches HEAD_CONTRAST_FACTOR x
+#: ``c_min`` (SUPPORT of those radii significant), and kept only if their run spans HEAD_RUN_WIDTHS of
+#: a body's width (a head is 2 R_h / shoulder width = 0.44 of it: two thirds of a head). Chosen on
+#: six_people 9089, 9093 and two_spectra 9087, 9089, 9094 (the new detections matched against the
+#: truth: 271 people, 113 false alarms, mostly coloured shadows and strips beside people; kept 181 and
+#: 25); docs/detection.md, "Dressed like the floor".
+HEAD_CONTRAST_FACTOR = 3.0
+HEAD_RUN_WIDTHS = 0.3
 #: A person's run of lines is at most RUN_WIDTHS times its model width (a sector of one person).
 RUN_WIDTHS = 1.5
 #: The run stops where the angular profile has fallen below VALLEY of its value at the person's
@@ -94,7 +103,8 @@ class People(eqx.Module):
     the background's mean on the person's profile; ``support``: share of significant radii;
     ``visible``: share of the person's window samples that no earlier person explained;
     ``explained``: the samples this person explained, as (first line, last line, first radius,
-    end radius), the region the background's life repairs when it is a ghost.
+    end radius), the region the background's life repairs when it is a ghost; ``head_only``: found
+    by their neck and head alone (the whole person's contrast under the gate: dressed like the floor).
     """
 
     valid: Bool[Array, " K"]
@@ -107,6 +117,7 @@ class People(eqx.Module):
     support: Float[Array, " K"]
     visible: Float[Array, " K"]
     explained: Int[Array, "K 4"]
+    head_only: Bool[Array, " K"]
 
 
 def prefix_sums(x: Float[Array, "n ..."]) -> Float[Array, "n_plus_1 ..."]:
@@ -252,7 +263,7 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
         """The next person from every line's figures ``fig``; ``d2`` and ``explained`` with them explained."""
         i_line, n_line, vis_line, excess, contrast, support, head_contrast, head_support = fig
         whole = (contrast >= CONTRAST_FACTOR * c_min) & (support >= SUPPORT)
-        head = (head_contrast >= CONTRAST_FACTOR * c_min) & (head_support >= SUPPORT)
+        head = (head_contrast >= HEAD_CONTRAST_FACTOR * c_min) & (head_support >= SUPPORT)
         person = candidate & (whole | head)
         score = jnp.where(person, excess, -jnp.inf)
         t0 = jnp.argmax(score)
@@ -283,7 +294,7 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
         visible = vis_line[t0] / n_line[t0]
         rec = dict(valid=found, i=i, centre=centre, first=first, last=last, contrast=contrast[t0],
                    excess=excess[t0], support=support[t0], visible=visible,
-                   explained=jnp.stack([e_first, e_last, r0, r1]))
+                   explained=jnp.stack([e_first, e_last, r0, r1]), head_only=found & ~whole[t0])
         return d2, explained | on, rec
 
     # one person a pass, until a pass finds nobody: the passes after it would find nobody either (nothing
@@ -365,6 +376,16 @@ def parted(valid: Bool[Array, " K"], floor_xy: Float[Array, "K 2"], own_xy: Floa
     near, apart = _distances(floor_xy) < MERGE_M, _distances(own_xy) >= MERGE_M
     both = valid & has_own
     return both[:, None] & both[None] & near & apart
+
+
+def a_person(polar: PolarIndex, people: People, i: Int[Array, " K"]) -> Bool[Array, " K"]:
+    """Whether each found person's run can be a person's (foot hypotheses ``i``): at least
+    :data:`MIN_RUN_LINES` lines (one line is a strip beside someone), and one found by their head alone
+    at least :data:`HEAD_RUN_WIDTHS` of a body's width (narrower is a strip too: the edge of a
+    coloured shadow or of someone's body)."""
+    run = people.last - people.first + 1
+    width = run * (2 * jnp.pi / polar.n_theta)
+    return (run >= MIN_RUN_LINES) & ~(people.head_only & (width < HEAD_RUN_WIDTHS * polar.hyp_width[i]))
 
 
 def merge_fragments(valid: Bool[Array, " K"], floor_xy: Float[Array, "K 2"], innermost: Bool[Array, " K"] | None = None,

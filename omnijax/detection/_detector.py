@@ -26,7 +26,7 @@ from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray, UInt8
 from ..camera import OmniCamera
 from ..config import Rig
 from ..geometry import wrap_2pi
-from ._blobs import MIN_RUN_LINES, People, find_people, merge_fragments, own_feet, parted
+from ._blobs import People, a_person, find_people, merge_fragments, own_feet, parted
 from ._change import MEASURES, Background, ReferenceTerms, change_across_light, change_against, reference_terms
 from ._foot import FootSigmaTable, build_foot_sigma_table, foot_sigma_lookup
 from ._indexing import Thresholds, build_thresholds, gather_rgb, hysteresis_sectors
@@ -121,9 +121,10 @@ class Detections(eqx.Module):
     hypothesis's); ``theta_l``/``theta_r`` the run's edges; ``peak`` the profile's d^2 excess;
     ``region`` the polar samples the person explained, (first line, last line, first radius
     index, end radius index), ``last`` may pass ``T - 1``: what the background's life re-learns
-    when the person is a ghost. ``strip`` marks the runs of one line that are not people
-    (:data:`~omnijax.detection._blobs.MIN_RUN_LINES`; not ``valid``): the background's life still
-    judges them, a strip being as often the last of a ghost (:func:`life_candidates`).
+    when the person is a ghost. ``strip`` marks the runs that are not people's
+    (:func:`~omnijax.detection.a_person`: one line, or a head alone narrower than a head; not
+    ``valid``): the background's life still judges them, a strip being as often the last of a ghost
+    (:func:`life_candidates`).
     """
 
     valid: Bool[Array, " K"]
@@ -269,9 +270,9 @@ def detections_of(detector: Detector, people: People, d2: Float[Array, "T R"]) -
     sigma_r, sigma_theta, bound_r, bound_theta = _foot_sigmas(detector, i, people.contrast, width, people.visible)
     first = polar.hyp_first
     xy = floor(i)
-    run = people.last - people.first + 1
-    valid = merge_fragments(people.valid, xy, i == first, polar.hyp_R[first], run)
-    strip = merge_fragments(people.valid, xy, i == first, polar.hyp_R[first]) & (run < MIN_RUN_LINES)
+    person = a_person(polar, people, i)
+    valid = merge_fragments(people.valid & person, xy, i == first, polar.hyp_R[first])
+    strip = merge_fragments(people.valid, xy, i == first, polar.hyp_R[first]) & ~person
     return Detections(
         valid=valid, r_f=polar.hyp_r_f[i], theta_f=theta_f, sigma_r_f=sigma_r, sigma_theta_f=sigma_theta,
         bound_r_f=bound_r, bound_theta_f=bound_theta,
