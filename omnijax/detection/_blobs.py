@@ -16,7 +16,9 @@ or one behind the other as the camera sees them, and the paper's estimate then f
    - the line of largest excess among those whose hypothesis is a person is the next person:
      its contrast over its samples not yet explained (the non-centrality per sample, eq 9's
      ``c``) at least :data:`CONTRAST_FACTOR` times ``c_min``, and at least :data:`SUPPORT` of its
-     radii with a significant profile (the psi2 threshold for ``x_f``);
+     radii with a significant profile (the psi2 threshold for ``x_f``); or the same over the
+     person's neck and head alone (``hyp_head`` to the outer end) with :data:`HEAD_CONTRAST_FACTOR`:
+     a person dressed like the floor, whose body the chromaticity measure cannot see;
    - its lines (:func:`person_lines`): the run of lines around that line whose d^2 over the
      person's radii is significant, cut where the angular profile dips and rises again (a
      second person beside the first: a valley between two humps), never wider than
@@ -28,7 +30,8 @@ or one behind the other as the camera sees them, and the paper's estimate then f
      step finds the same person again and the next person is sought in what is left.
 3. Two people's feet are at least a shoulder width apart; two detections whose feet are closer
    than :data:`MERGE_M` on the floor are one person's fragments and the weaker goes, and a run of
-   fewer than :data:`MIN_RUN_LINES` lines is a strip beside someone, not a person
+   fewer than :data:`MIN_RUN_LINES` lines (or one found by the head alone narrower than
+   :data:`HEAD_RUN_WIDTHS` of a body, :func:`a_person`) is a strip beside someone, not a person
    (:func:`merge_fragments`, the one place where detections are merged); so are two on the
    innermost foot hypothesis (someone under the camera, whose image fans over a wide angle)
    within the blind disc's diameter. Two whose runs share lines and whose feet from their own lines
@@ -243,7 +246,10 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
         o_line = out[i_line]
         h_line = polar.hyp_head[i_line]
         n_prefix = n_all[lines]
-        vis_prefix = n_prefix if explained is None else _prefix(_windows((ok * (1.0 - explained))[rows], half, reach, B))
+        if explained is None:  # every sample unexplained: the window's samples that count (whole numbers)
+            vis_prefix = n_prefix
+        else:
+            vis_prefix = _prefix(_windows((ok * (1.0 - explained))[rows], half, reach, B))
         sig_prefix = _prefix((Q > window[None]).astype(jnp.float32))
 
         def part(a):
