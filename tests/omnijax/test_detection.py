@@ -320,7 +320,8 @@ def test_a_person_dressed_like_the_floor_is_found_by_their_head(paper_detector, 
     neck and head (six_people 9081 frame 490: a person 1.27 m out, d^2 13-99 a sample there over a head's
     width, the body's at the background's mean; 360 of that seed's 387 misses were its two floor-coloured
     people). Over the whole person the contrast is below the gate; over the head and neck it passes, and
-    eq 12 puts the foot where the head's top says (the prior's height). The same change over a strip
+    eq 12 puts the foot where the head's top says (the prior's height), with that height's spread in its
+    sigma's bound part. The same change over a strip
     narrower than a head is not a person (a strip for the background's life to judge), nor is a weaker
     head. (At 3.6 m such a head is 13 samples a line, below psi1's threshold: the far field stays a
     limit.)"""
@@ -349,6 +350,12 @@ def test_a_person_dressed_like_the_floor_is_found_by_their_head(paper_detector, 
     assert float(d.contrast[k]) < CONTRAST_FACTOR * float(det.thresholds.c_min)  # the case: not by the whole
     assert float(d.r_f[k]) == pytest.approx(float(polar.hyp_r_f[i]), abs=1.5)
     assert math.remainder(float(d.theta_f[k]) - 100 * step, 2 * math.pi) == pytest.approx(0.0, abs=0.02)
+    # the foot from the head's top: the prior height's spread is in its sigma, the top moving dout/dH px
+    # a metre of height, the foot with it (central differences of the tables)
+    r_f, out = np.asarray(polar.hyp_r_f), np.asarray(polar.hyp_out)
+    slope = (r_f[i + 4] - r_f[i - 4]) / (out[i + 4] - out[i - 4])
+    want = float(det.sigma_H_p) * float(polar.hyp_dout_dH[i]) * slope
+    assert float(d.bound_r_f[k]) == pytest.approx(want, rel=1e-6) and want > 1.0
     narrow = int(np.floor(0.5 * (HEAD_RUN_WIDTHS * float(polar.hyp_width[i]) / step - 1)))  # 2 narrow + 1 lines
     ks, d = found(30.0, narrow)
     assert ks == [] and bool(np.any(np.asarray(d.strip)))
