@@ -395,15 +395,13 @@ def a_person(polar: PolarIndex, people: People, i: Int[Array, " K"]) -> Bool[Arr
 
 
 def merge_fragments(valid: Bool[Array, " K"], floor_xy: Float[Array, "K 2"], innermost: Bool[Array, " K"] | None = None,
-                    inner_R=0.0, run_lines: Int[Array, " K"] | None = None) -> Bool[Array, " K"]:
-    """``valid`` less every detection whose run has fewer than :data:`MIN_RUN_LINES` lines (``run_lines``,
-    if given), and every one whose foot lies within :data:`MERGE_M` of an earlier (stronger)
-    valid one's on the floor; or, both on the ``innermost`` foot hypothesis (the person reaches into
+                    inner_R=0.0) -> Bool[Array, " K"]:
+    """``valid`` less every detection whose foot lies within :data:`MERGE_M` of an earlier (stronger)
+    valid one's on the floor (runs that are no person's, :func:`a_person`, are left out of ``valid``
+    first by the caller); or, both on the ``innermost`` foot hypothesis (the person reaches into
     the blind disc under the camera: the foot is somewhere inside the circle of floor radius
     ``inner_R``, and a person there spans a wide fan of lines that splits into fragments), within
     the disc's diameter."""
-    if run_lines is not None:
-        valid = valid & (run_lines >= MIN_RUN_LINES)
     d = _distances(floor_xy)
     idx = jnp.arange(valid.shape[0])
     near = d < MERGE_M
