@@ -118,7 +118,8 @@ class BackgroundKeeper:
         #: learning's minority (:func:`omnijax.detection.settle_learning`)
         self.settled_share = 0.0
         if bg.minority is not None:
-            lines, took = settle_learning(detector, lines, bg, jnp.asarray(float(rig.detection.ghost_edge)))
+            lines, took = settle_learning(detector, lines, bg, jnp.asarray(float(rig.detection.ghost_edge)),
+                                          jnp.asarray(float(learning_frames)))
             self.settled_share = float(jnp.sum(took) / jnp.maximum(jnp.sum(detector.polar.line_ok), 1))
         self.life = start_life(lines)
         self.rates = life_rates(rig, fps, learning_frames, every)
