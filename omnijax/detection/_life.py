@@ -63,7 +63,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, ArrayLike, Bool, Float, UInt8
 
-from ._change import AGREE, Background, change_against, change_measure, learned
+from ._change import AGREE, Background, change_across_light, change_against, change_measure, learned
 from ._detector import (
     Detections,
     DetectionTrace,
@@ -174,7 +174,10 @@ def ghost_evidence(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBa
 
         def least(colours, var_factor):
             inside = jnp.broadcast_to(colours[a, rr][:, None], (*b.shape, 3))
-            d = change_measure(inside, colours[b, rb], var_factor[b, rb], sig)
+            if detector.light_axis is None:
+                d = change_measure(inside, colours[b, rb], var_factor[b, rb], sig)
+            else:  # the lights' own gradients (a lamp's pool of another colour) are no object's edge
+                d = change_across_light(inside, colours[b, rb], var_factor[b, rb], sig, detector.light_axis)
             return jnp.min(jnp.where(ok[b, rb], d, jnp.inf), axis=1)
 
         now = least(cur, jnp.ones_like(lines.var_factor))

@@ -273,6 +273,35 @@ def test_settling_takes_no_one_who_stood_beside_the_spot_first(paper_detector, r
     assert abs(int(np.argmin(np.abs(np.asarray(polar.hyp_r_f) - float(dets.r_f[k])))) - hyp(3.4)) <= 2
 
 
+def test_a_lamps_pool_of_another_colour_is_no_edge_under_the_light_axis(paper_detector, room):
+    """two_spectra 9118: a warm lamp came back on over floor the background held under daylight alone
+    (the swap of lights the light axis does not bound), a detection of contrast 3 at the pool. The
+    pool fades round the lamp, so 3-7 px apart the lamp's share differs: to the paper's measure an
+    edge (the person's verdict, never a ghost: a false alarm for 6 s). A change of the lamp's share is
+    a relighting, and under the light axis the evidence measures it as the detector does: no edge, while
+    a person in the same pool keeps theirs."""
+    from runtime.files import load_rig
+
+    from omnijax import build_detector
+    from omnijax.detection._indexing import gather_rgb
+    from tests.paths import CONFIGS
+
+    two = build_detector(load_rig(CONFIGS / "two_lights.toml"))
+    rng, base, person, _ = room
+    lines, dets, cur, _, d2, k, first, last = _one_detection_in_polar(two, [_noisy(rng, base) for _ in range(20)],
+                                                                      _noisy(rng, person))
+    T = two.polar.n_theta
+    off = ((np.arange(T) - 0.5 * (first + last) + T / 2) % T) - T / 2
+    lamp = (np.exp(-((off / 8.0) ** 2))[:, None, None] * np.exp(np.asarray(two.light_axis)))  # its share, in colour
+    polar = lambda img: np.asarray(gather_rgb(jnp.asarray(img), two.polar.line_index), np.float32)
+    for now, edge_paper, edge_two in ((polar(_noisy(rng, base)), (6.0, np.inf), (0.0, 2.0)),
+                                      (cur, (50.0, np.inf), (50.0, np.inf))):
+        pooled = jnp.asarray(np.clip(now * (1.0 + lamp) / 2.0, 0.0, 255.0))  # daylight and the lamp, halved
+        for det, (lo, hi) in ((paper_detector, edge_paper), (two, edge_two)):
+            e = np.asarray(ghost_evidence(det, pooled, lines, jnp.asarray(d2), dets).edge_now[k])
+            assert np.all((e >= lo) & (e < hi)), (det.light_axis, e)
+
+
 def _one_detection_in_polar(det, bg_frames, now):
     """The one detection of ``now`` against the background learnt from ``bg_frames``, with what the
     evidence tests paint on: the lines, the frame and the background's colours at the polar samples
