@@ -280,10 +280,9 @@ def test_a_lamps_pool_of_another_colour_is_no_edge_under_the_light_axis(paper_de
     edge (the person's verdict, never a ghost: a false alarm for 6 s). A change of the lamp's share is
     a relighting, and under the light axis the evidence measures it as the detector does: no edge, while
     a person in the same pool keeps theirs."""
-    from runtime.files import load_rig
-
     from omnijax import build_detector
     from omnijax.detection._indexing import gather_rgb
+    from runtime.files import load_rig
     from tests.paths import CONFIGS
 
     two = build_detector(load_rig(CONFIGS / "two_lights.toml"))
