@@ -15,7 +15,8 @@ frame (:func:`live_step`, two jitted calls), after detection, with the frame's d
    region is that person's, not measured for this one. A person (standing too) differs from the
    floor beside them: hundreds. A ghost (the background still holds someone who has gone, or a piece
    of furniture moved away) shows floor continuing the floor beside it, about 1, while the background
-   there had an edge. Chromaticity makes this hold under shadows and the floor's shading. The
+   there had an edge. Chromaticity makes this hold under shadows and the floor's shading (under lights
+   of two colours, ``light_axis``, the detector's d^2 across the light: a lamp's pool is no edge). The
    verdict (:func:`verdicts`) is per side: a ghost needs one side with no edge now and more before,
    and no side with a person's edge (a ghost continues the floor on at least one side, whatever
    adjoins the other). The caller says which detections are trusted people (their tracks walked
