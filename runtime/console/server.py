@@ -17,11 +17,13 @@ import asyncio
 import hmac
 import ipaddress
 import math
+import os
 import secrets
 import socket
 import sys
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from importlib import resources
 from pathlib import Path
 
@@ -41,6 +43,18 @@ MANUAL_S = POINT_S
 MAX_MANUAL_S = 3600.0
 #: JPEG quality of the live images.
 JPEG_QUALITY = 80
+#: The nice value of the console's threads (the server's and its workers'): a page never takes the CPU
+#: from the control thread (Linux, where a thread has a nice value of its own; elsewhere the default).
+NICE = 10
+
+
+def _yield_cpu() -> None:
+    """Give the calling thread the console's lower scheduling priority (:data:`NICE`; Linux only)."""
+    if sys.platform.startswith("linux"):
+        try:
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)
+        except OSError:  # not allowed here: the page then shares the CPU as before
+            pass
 
 
 class ApiError(Exception):
@@ -168,8 +182,10 @@ class Console:
 
     def _serve(self) -> None:
         try:
+            _yield_cpu()
             self._aio = asyncio.new_event_loop()
             asyncio.set_event_loop(self._aio)
+            self._aio.set_default_executor(ThreadPoolExecutor(2, "omnijax-console-work", initializer=_yield_cpu))
             self._stop = asyncio.Event()
             runner = web.AppRunner(self.app(), access_log=None, handle_signals=False, shutdown_timeout=1.0)
             self._aio.run_until_complete(runner.setup())
@@ -181,6 +197,7 @@ class Console:
         self._ready.set()
         self._aio.run_until_complete(self._stop.wait())
         self._aio.run_until_complete(runner.cleanup())
+        self._aio.run_until_complete(self._aio.shutdown_default_executor())
         self._aio.close()
 
     # -- the app --------------------------------------------------------------------------

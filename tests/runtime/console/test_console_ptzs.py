@@ -4,6 +4,9 @@ a rig of two PTZs; every PTZ's view is served, and a manual pointing names its P
 from __future__ import annotations
 
 import json
+import os
+import sys
+import threading
 import urllib.error
 import urllib.request
 from types import SimpleNamespace
@@ -69,3 +72,15 @@ def test_a_manual_pointing_names_its_ptz(console):
         assert code == 400 and "camera: expected a PTZ number 0 to 1" in body["error"]
     code, body = _call(console, "POST", "/api/home", {"camera": 1})
     assert code == 200 and body["camera"] == 1 and body["pan_deg"] == 0.0
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="a thread's own nice value is Linux's")
+def test_the_consoles_threads_yield_the_cpu_to_the_control_thread(console):
+    """The server's thread and the workers that encode its images run at NICE (the control thread at 0)."""
+    from runtime.console.server import NICE
+
+    assert _call(console, "GET", "/api/view/omni.jpg")[0] == 200  # a worker has encoded an image
+    threads = [t for t in threading.enumerate() if t is console._thread or t.name.startswith("omnijax-console-work")]
+    assert len(threads) >= 2
+    assert {os.getpriority(os.PRIO_PROCESS, t.native_id) for t in threads} == {NICE}
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) < NICE
