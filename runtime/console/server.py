@@ -43,6 +43,8 @@ MANUAL_S = POINT_S
 MAX_MANUAL_S = 3600.0
 #: JPEG quality of the live images.
 JPEG_QUALITY = 80
+#: Largest request body the API reads (bytes); a larger one is answered 413.
+MAX_BODY = 2**20
 #: The nice value of the console's threads (the server's and its workers'): a page never takes the CPU
 #: from the control thread (Linux, where a thread has a nice value of its own; elsewhere the default).
 NICE = 10
@@ -197,13 +199,17 @@ class Console:
         self._ready.set()
         self._aio.run_until_complete(self._stop.wait())
         self._aio.run_until_complete(runner.cleanup())
+        left = asyncio.all_tasks(self._aio)  # a connection still open (a page polling at the end)
+        for task in left:
+            task.cancel()
+        self._aio.run_until_complete(asyncio.gather(*left, return_exceptions=True))
         self._aio.run_until_complete(self._aio.shutdown_default_executor())
         self._aio.close()
 
     # -- the app --------------------------------------------------------------------------
 
     def app(self) -> web.Application:
-        app = web.Application(middlewares=[self._errors, self._auth], client_max_size=2**20)
+        app = web.Application(middlewares=[self._errors, self._auth], client_max_size=MAX_BODY)
         get = [("/", self._page), ("/static/{name}", self._static), ("/api/status", self._status),
                ("/api/zones", self._get_zones), ("/api/view/{which}.jpg", self._view), ("/api/events", self._events),
                ("/api/faces", self._faces), ("/api/faces/{k}.jpg", self._face), ("/api/calibration", self._get_cal)]
@@ -223,6 +229,9 @@ class Console:
         except web.HTTPException as exc:
             if exc.status < 400:
                 raise
+            if exc.status == 413:
+                return web.json_response({"error": f"request body too large: at most {MAX_BODY // 1024} KiB "
+                                                   f"({request.method} {request.path})"}, status=413)
             return web.json_response({"error": f"{exc.reason}: {request.method} {request.path}"}, status=exc.status)
         except Exception as exc:  # a bug in a handler: the loop goes on, the page is told
             return web.json_response({"error": f"internal error: {exc!r}"}, status=500)

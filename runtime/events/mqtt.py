@@ -10,13 +10,21 @@ by a slow or absent broker (messages wait in the client's queue meanwhile, at mo
 :data:`MAX_QUEUED`). Events published while the client is (re)connecting may reach the broker out
 of order (the client resends its queue on connecting while new events go straight out): order
 by an event's ``frame`` or ``time``, which only grow.
+
+A broker that does not answer at the start, or goes away later, is one warning line per outage
+(``MQTT broker ... unreachable`` / ``lost``, with the reason) and one when it is back (``connected again
+after N s``); the command runs on meanwhile, its events still in ``events.jsonl``, and the client
+retries every 1 to :data:`RETRY_MAX_S` s. ``summary()`` counts the outages.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import os
 import re
+import threading
+import time
 import urllib.parse
 from dataclasses import dataclass
 
@@ -24,6 +32,10 @@ import paho.mqtt.client as mqtt
 
 #: Messages kept while the broker is away (the oldest new ones are dropped beyond).
 MAX_QUEUED = 1000
+#: Longest wait between two attempts to reach the broker (s); the first retry comes after 1 s.
+RETRY_MAX_S = 10
+
+log = logging.getLogger("omnijax.events")
 _PREFIX = re.compile(r"^[A-Za-z0-9_\-]+(/[A-Za-z0-9_\-]+)*$")
 
 
@@ -75,11 +87,42 @@ class MqttPublisher:
             self.client.tls_set()
         self.status_topic = f"{self.url.prefix}/status"
         self.client.will_set(self.status_topic, "offline", qos=1, retain=True)
+        self.client.reconnect_delay_set(1, RETRY_MAX_S)
         self.client.on_connect = self._on_connect
+        self.client.on_connect_fail = self._on_connect_fail
+        self.client.on_disconnect = self._on_disconnect
+        self.outages = 0
+        self._lock = threading.Lock()
+        self._down_since: float | None = None  # in an outage since (monotonic s)
+        self._closing = False
+
+    def _down(self, what: str, why: str) -> None:
+        """The broker cannot be reached: a warning at the first failure of an outage, then quiet."""
+        with self._lock:
+            first = self._down_since is None and not self._closing
+            if first:
+                self._down_since = time.monotonic()
+                self.outages += 1
+        if first:
+            log.warning("MQTT broker %s %s (%s); retrying every 1-%d s, the events are still written to "
+                        "events.jsonl", self.url.shown(), what, why, RETRY_MAX_S)
 
     def _on_connect(self, client, _userdata, _flags, reason_code, _properties) -> None:
-        if not reason_code.is_failure:
-            client.publish(self.status_topic, "online", qos=1, retain=True)
+        if reason_code.is_failure:
+            self._down("refused the connection", str(reason_code))
+            return
+        client.publish(self.status_topic, "online", qos=1, retain=True)
+        with self._lock:
+            since, self._down_since = self._down_since, None
+        if since is not None:
+            log.warning("MQTT broker %s connected again after %.1f s", self.url.shown(), time.monotonic() - since)
+
+    def _on_connect_fail(self, _client, _userdata) -> None:
+        self._down("unreachable", "no connection")
+
+    def _on_disconnect(self, _client, _userdata, _flags, reason_code, _properties) -> None:
+        if not self._closing:
+            self._down("lost", str(reason_code))
 
     @property
     def connected(self) -> bool:
@@ -98,9 +141,12 @@ class MqttPublisher:
     def close(self, timeout: float = 2.0) -> None:
         """Say ``offline``, let the queued messages out (at most ``timeout`` s), disconnect."""
         if self.connected:
+            self._closing = True
             self.client.publish(self.status_topic, "offline", qos=1, retain=True).wait_for_publish(timeout)
+        self._closing = True
         self.client.disconnect()
         self.client.loop_stop()
 
     def summary(self) -> dict:
-        return {"broker": self.url.shown(), "published": self.published, "connected": self.connected}
+        return {"broker": self.url.shown(), "published": self.published, "connected": self.connected,
+                "outages": self.outages}

@@ -19,10 +19,11 @@ def free_port() -> int:
 
 
 class Broker:
-    """``with Broker() as b:`` an amqtt broker at ``b.url`` (``mqtt://127.0.0.1:PORT``) until the block ends."""
+    """``with Broker() as b:`` an amqtt broker at ``b.url`` (``mqtt://127.0.0.1:PORT``; ``port``: that port, else a
+    free one) until the block ends."""
 
-    def __init__(self):
-        self.port = free_port()
+    def __init__(self, port: int | None = None):
+        self.port = port or free_port()
         self.url = f"mqtt://127.0.0.1:{self.port}"
         self._ready, self._stop = threading.Event(), None
         self._thread = threading.Thread(target=self._run, name="amqtt-broker", daemon=True)

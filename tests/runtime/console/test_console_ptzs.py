@@ -84,3 +84,15 @@ def test_the_consoles_threads_yield_the_cpu_to_the_control_thread(console):
     assert len(threads) >= 2
     assert {os.getpriority(os.PRIO_PROCESS, t.native_id) for t in threads} == {NICE}
     assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) < NICE
+
+
+def test_a_10_mb_request_body_is_refused_in_one_line_and_nothing_changes(console):
+    body = b'{"zones": [' + b" " * (10 * 2**20) + b"]}"
+    req = urllib.request.Request(console.url + "api/zones", data=body, method="POST")
+    req.add_header("Authorization", f"Bearer {console.token}")
+    with pytest.raises(urllib.error.HTTPError) as err:
+        urllib.request.urlopen(req, timeout=60)
+    assert err.value.code == 413
+    assert json.loads(err.value.read()) == {"error": "request body too large: at most 1024 KiB (POST /api/zones)"}
+    assert console.zones == () and console.zones_version == 0
+    assert _call(console, "GET", "/api/view/omni.jpg")[0] == 200  # still serving

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import time
 from types import SimpleNamespace
 
@@ -12,7 +13,7 @@ import pytest
 
 from runtime.events import EventLog, MqttPublisher, parse_mqtt_url
 from runtime.realtime.tracker import Track
-from tests.runtime.console.broker import Broker, Subscriber
+from tests.runtime.console.broker import Broker, Subscriber, free_port
 
 
 def _until(cond, timeout=10.0) -> bool:
@@ -100,3 +101,35 @@ def test_latest_image_shows_the_newest_frame_of_a_second_video():
         while time.monotonic() < deadline and (view()[0] is None or view.image[0, 0, 0] != 4):
             time.sleep(0.02)
         assert view.image[0, 0, 0] == 4 and view()[0][0, 0, 0] == 4
+
+
+def test_a_broker_down_at_the_start_or_gone_later_is_one_warning_each_and_events_go_on(caplog):
+    """No broker at the start: one warning, publishing never raises nor waits; the broker comes up: the queued
+    events arrive and one line says so; it goes away: one warning again."""
+    port = free_port()
+    caplog.set_level(logging.WARNING, logger="omnijax.events")
+    mqtt = MqttPublisher(f"mqtt://127.0.0.1:{port}/hall").start()
+    try:
+        assert _until(lambda: mqtt.outages == 1, 10)
+        t0 = time.monotonic()
+        for k in range(5):
+            mqtt({"event": "person_appeared", "track": k})
+        assert time.monotonic() - t0 < 0.5 and not mqtt.connected
+        time.sleep(1.5)  # a retry or two fail: still one warning
+        said = lambda: [r.getMessage() for r in caplog.records if r.name == "omnijax.events"]
+        down = said()
+        assert len(down) == 1 and f"MQTT broker mqtt://127.0.0.1:{port}/hall unreachable" in down[0]
+        assert "events.jsonl" in down[0] and "\n" not in down[0]
+        with Broker(port) as broker:
+            sub = Subscriber(broker.port, "hall/#")
+            assert _until(lambda: mqtt.connected, 20)
+            got = sub.wait_for(lambda m: m[0] == "hall/events/person_appeared" and m[1]["track"] == 4, 10)
+            assert got and {m[1]["track"] for m in sub.messages if "/events/" in m[0]} == set(range(5))
+            assert len(said()) == 2 and "connected again after" in said()[-1]
+            sub.close()
+        assert _until(lambda: mqtt.outages == 2, 20)
+        assert len(said()) == 3 and f"{port}/hall lost (" in said()[-1]
+        mqtt({"event": "person_left", "track": 4})  # gone: still no exception
+        assert mqtt.summary()["outages"] == 2 and mqtt.published == 6
+    finally:
+        mqtt.close(timeout=0.5)
