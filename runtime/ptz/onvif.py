@@ -610,13 +610,18 @@ class OnvifDriver(DriverBase):
         self._moving, self._settled = True, False
 
     async def _steer(self, here) -> None:
-        """Continuous mode: a velocity toward the goal, or Stop once within a unit on every axis."""
+        """Continuous mode: a velocity toward the goal, or Stop once within half a unit on every axis. The
+        camera coasts on for the Stop's round trip (longer on a slow link or a loaded machine): where it
+        reports its position, the next status poll looks where it stopped and steers back if it is off."""
         err = [g - h for g, h in zip(self._goal, here)]
         if all(abs(e) <= 0.5 for e in err):
-            if any(self._velocity):
+            stopped = any(self._velocity)
+            if stopped:
                 self._count("moves")
                 await self._call(self._ptz, "Stop", {"ProfileToken": self._token, "PanTilt": True, "Zoom": True})
-            self._velocity, self._moving, self._settled = (0.0, 0.0, 0.0), False, True
+            self._velocity = (0.0, 0.0, 0.0)
+            verify = stopped and self.discovered["position"]
+            self._moving, self._settled = bool(verify), not verify
             return
         # the camera keeps the velocity until the next command: cover at most half the error per control period
         # (measured), so that the loop stays stable however slow the link or the machine is

@@ -341,3 +341,14 @@ def test_warnings_are_lines_like_every_other_message(capsys, monkeypatch):
         logging.getLogger("omnijax.ptz").info("PTZ connected")
     assert capsys.readouterr().err == "omnijax run: warning: PTZ link lost on onvif://h: gone; reconnecting\n"
     assert logging.getLogger().handlers == []
+
+
+def test_a_continuous_move_over_a_slow_link_ends_on_the_goal():
+    """A continuous-only camera behind a slow link (every request 0.15 s late: the Stop too, so the camera
+    coasts on after it was sent): the steering and the look after the Stop end within two units."""
+    with OnvifEmulator(PROFILE, quirks=("continuous-only",), latency_s=0.15) as em:
+        with OnvifDriver(f"onvif://127.0.0.1:{em.address[1]}", PROFILE).connect(timeout=20) as d:
+            t = d.set_target(math.radians(40), math.radians(20), 6)
+            assert d.wait_reached(30), d.stats()
+            st = em.state()["units"]
+            assert max(abs(st[a] - getattr(t, a)) for a in ("pan", "tilt", "zoom")) <= 2, (st, t)
