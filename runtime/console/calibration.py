@@ -4,10 +4,12 @@ The operator drives the PTZ (the page's arrow keys: manual pointings) until its 
 then clicks the mark's foot in the omni image with the mark's height above the floor: :meth:`mark`
 waits until the PTZ stands still, reads its position back (device degrees, as ``OBS.json`` wants them)
 and adds an aim to the floor position clicked (a click within :data:`SAME_POSITION_PX` of an earlier
-one adds to that position: the same pole, another height). :meth:`fit` writes ``observations.json``
-(docs/calibration.md's format) and runs ``omnijax calibrate`` on it in a child process, so that the fit
-never competes with the loop for the interpreter; its ``calibration.json`` (fitted values, sigmas,
-residuals) is what the page shows. Everything goes to ``calibration/`` of the run's output folder.
+one adds to that position: the same pole, another height). A PTZ standing at a limit of its range
+is refused: it stopped there, not on the mark (e.g. a floor mark below its lowest tilt). :meth:`fit`
+writes ``observations.json`` (docs/calibration.md's format) and runs ``omnijax calibrate`` on it in a
+child process, so that the fit never competes with the loop for the interpreter; its
+``calibration.json`` (fitted values, sigmas, residuals) is what the page shows. Everything goes to
+``calibration/`` of the run's output folder.
 """
 
 from __future__ import annotations
@@ -67,6 +69,13 @@ class CalibrationAssistant:
             pos = self.driver.query_position(2.0)
         except (PtzError, TimeoutError) as exc:
             raise ValueError(f"the PTZ did not say where it is: {exc}") from None
+        for k, axis in enumerate(("pan", "tilt")):
+            limits = self.profile.limits_units(axis)
+            at = [u for u in limits if abs(pos.units[k] - u) <= 1]
+            if at and not (axis == "pan" and self.profile.pan_continuous):
+                deg = at[0] / getattr(self.profile, axis).units_per_deg
+                raise ValueError(f"the PTZ stands at its {axis} limit ({deg:g} deg): its crosshair cannot be on a "
+                                 "mark beyond it; choose a mark it can centre")
         aim = {"height_m": round(height_m, 4), "pan_deg": round(pos.units[0] / self.profile.pan.units_per_deg, 4),
                "tilt_deg": round(pos.units[1] / self.profile.tilt.units_per_deg, 4)}
         near = [p for p in self.positions if math.hypot(p["x"] - x, p["y"] - y) <= SAME_POSITION_PX]

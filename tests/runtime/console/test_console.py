@@ -263,6 +263,12 @@ def test_calibration_assistant_records_aims_and_fits_the_rig(demo):
         # written into the run's staging folder (renamed to --out when the run ends: docs/runtime.md)
         stage = demo.out.parent / f".{demo.out.name}.partial-{demo.proc.pid}"
         assert (stage / "calibration" / "observations.json").is_file()
+        # a mark below the PTZ's lowest tilt: it stops at its limit, not on the mark; refused, nothing added
+        code, _ = call(demo, "POST", "/api/ptz", {"pan_deg": 10.0, "tilt_deg": -85.0, "zoom": 1.0, "seconds": 300})
+        assert code == 200
+        code, body = call(demo, "POST", "/api/calibration/mark", {"x": 330.0, "y": 250.0, "height_m": 0.0})
+        assert code == 422 and "the PTZ stands at its tilt limit" in body["error"], body
+        assert call(demo, "GET", "/api/calibration")[1]["aims"] == 2 * len(marks)
     finally:  # the manual pointing must not outlive the test, whatever failed
         assert call(demo, "POST", "/api/release")[0] == 200
 
