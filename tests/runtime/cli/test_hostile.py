@@ -313,12 +313,13 @@ def test_the_emulator_child_goes_when_its_parent_is_killed(tmp_path):
     """SIGKILL leaves no chance to clean up: the emulator child notices and stops by itself."""
     mark = f"{os.getpid()}-{time.monotonic_ns()}"
     script = ("import sys, time\n"
+              "from pathlib import Path\n"
               "from runtime.ptz.child import EmulatorProcess\n"
-              "emu = EmulatorProcess('visca').start()\n"
+              "emu = EmulatorProcess('visca', folder=Path(sys.argv[1])).start()\n"  # killed: nothing cleans up /tmp
               "print(emu.proc.pid, flush=True)\n"
               "time.sleep(600)\n")
-    parent = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, stdout=subprocess.PIPE, text=True,
-                              env={**os.environ, "OMNIJAX_TEST_MARK": mark})
+    parent = subprocess.Popen([sys.executable, "-c", script, str(tmp_path)], cwd=ROOT, stdout=subprocess.PIPE,
+                              text=True, env={**os.environ, "OMNIJAX_TEST_MARK": mark})
     try:
         emulator = int(parent.stdout.readline())
         assert emulator in _children_marked(mark)
