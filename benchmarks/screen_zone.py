@@ -1,10 +1,11 @@
 """False alarms from a flickering screen, with and without an ignore zone over it (issue 25).
 
 For each seed, runs ``omnijax demo --scenario flickering_screen --seed S --frames N --pace all
---no-video`` twice, on copies of the scenario and its rig in a temporary folder: as shipped, and with
-the rig holding one ``[[zones]] kind = "ignore"`` polygon over the screen (docs/console.md#zones): the
+--no-video`` three times, on copies of the scenario and its rig in a temporary folder: as shipped,
+with the rig holding one ``[[zones]] kind = "ignore"`` polygon over the screen (docs/console.md#zones): the
 box, in omni image pixels of the configured rig, around the image of the screen's rectangle (its
-edges subdivided: straight edges are curves in the omni image), grown by ``--margin-px``. Prints each
+edges subdivided: straight edges are curves in the omni image), grown by ``--margin-px``; and, as the
+floor of what a zone can do, the same world without its screen (zone ``no screen``). Prints each
 run's summary.json ``detection`` (false alarms: detections farther than 0.5 m from every true foot)
 and the medians over the seeds, as a table and, with ``--json``, as JSON.
 
@@ -53,9 +54,21 @@ def screen_zone(margin_px: float) -> list[list[float]]:
             [round(x0, 1), round(y1, 1)]]
 
 
-def run_demo(folder: Path, seed: int, frames: int, zone: list[list[float]] | None) -> dict:
-    """One demo on copies of the scenario and its rig (with the zone, if given); its summary.json (a run
-    already in ``folder``, from an earlier ``--keep``, is read, not repeated)."""
+def without_screens(text: str) -> str:
+    """The scenario's TOML text without its ``[[screens]]`` tables (the same world otherwise)."""
+    out, skipping = [], False
+    for line in text.splitlines(keepends=True):
+        if line.startswith("["):
+            skipping = line.strip() == "[[screens]]"
+        if not skipping:
+            out.append(line)
+    return "".join(out)
+
+
+def run_demo(folder: Path, seed: int, frames: int, zone: list[list[float]] | None, screen: bool = True) -> dict:
+    """One demo on copies of the scenario and its rig (with the zone, if given; without the screen if
+    ``screen`` is false); its summary.json (a run already in ``folder``, from an earlier ``--keep``, is
+    read, not repeated)."""
     if (folder / "out" / "summary.json").is_file():
         return json.loads((folder / "out" / "summary.json").read_text())
     rig_text = (SCENARIO.parent / "../paper.toml").resolve().read_text()
@@ -63,7 +76,8 @@ def run_demo(folder: Path, seed: int, frames: int, zone: list[list[float]] | Non
         rig_text += f'\n[[zones]]\nkind = "ignore"\nname = "screen"\npoints = {json.dumps(zone)}\n'
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "paper.toml").write_text(rig_text)
-    (folder / "scenario.toml").write_text(SCENARIO.read_text().replace('rig = "../paper.toml"', 'rig = "paper.toml"'))
+    text = SCENARIO.read_text().replace('rig = "../paper.toml"', 'rig = "paper.toml"')
+    (folder / "scenario.toml").write_text(text if screen else without_screens(text))
     out = folder / "out"
     cmd = [sys.executable, "-m", "runtime.cli", "demo", "--scenario", str(folder / "scenario.toml"), "--seed",
            str(seed), "--frames", str(frames), "--pace", "all", "--no-video", "--quiet", "--out", str(out)]
@@ -88,8 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     base = Path(tempfile.mkdtemp(prefix="screen_zone_")) if args.keep is None else args.keep
     try:
         for seed in args.seeds:
-            for name, z in (("none", None), ("ignore", zone)):
-                summary = run_demo(base / f"{seed}_{name}", seed, args.frames, z)
+            for name, z, screen in (("none", None, True), ("ignore", zone, True), ("no screen", None, False)):
+                summary = run_demo(base / f"{seed}_{name.replace(' ', '_')}", seed, args.frames, z, screen)
                 d = summary["detection"]
                 rows.append({"seed": seed, "zone": name, "frames": summary["frames"], "detections": d["detections"],
                              "false_alarms": d["false_alarms"], "false_alarm_rate": d["false_alarm_rate"],
@@ -100,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
             shutil.rmtree(base, ignore_errors=True)
     keys = ("false_alarms", "false_alarm_rate", "false_alarms_per_frame", "miss_rate")
     median = {name: {k: statistics.median(r[k] or 0.0 for r in rows if r["zone"] == name) for k in keys}
-              for name in ("none", "ignore")}
+              for name in ("none", "ignore", "no screen")}
     if args.json:
         print(json.dumps({"zone_points_px": zone, "runs": rows, "median": median}, indent=2))
         return 0
