@@ -132,6 +132,25 @@ def check_setup(obs: Observations, rig: Rig, source: str) -> None:
                                f"circle (rim {float(rig.omni.rim):g} px)")
 
 
+def check_limits(obs: Observations, profile, source: str) -> None:
+    """Refuse a reading at a limit of the PTZ's range (within a device unit): the PTZ stopped there, not on
+    the mark, and the fit would take it for an aim at the mark (one-line CalibrationError). ``profile``:
+    the device profile of the readings (``None``: nothing to check)."""
+    if profile is None:
+        return
+    for axis, readings in (("pan", obs.pan), ("tilt", obs.tilt)):
+        if axis == "pan" and profile.pan_continuous:
+            continue
+        sec = getattr(profile, axis)
+        for j, v in enumerate(np.degrees(np.asarray(readings))):
+            at = [lim for lim in sec.limits_deg if abs(v - lim) * sec.units_per_deg <= 1.0]
+            if at:
+                k, h = int(obs.position[j]), float(obs.height[j])
+                raise CalibrationError(
+                    f"{source}: position {k + 1}'s aim at {h:g} m reads {axis} {v:g} deg, the PTZ's {axis} limit "
+                    f"({at[0]:g} deg): it stopped there, not on the mark; leave that aim out (a mark it cannot centre)")
+
+
 def check_fit(fit: RigFit, max_sigma_m: float = MAX_SIGMA_M, max_sigma_deg: float = MAX_SIGMA_DEG) -> str | None:
     """Why a fitted rig is not trustworthy (one line), or None.
 

@@ -169,6 +169,7 @@ def _calibrate(args, rig, profile) -> int:
         calibrated_profile,
         calibrated_toml,
         check_fit,
+        check_limits,
         check_setup,
         chi2_p_value,
         config_prior,
@@ -188,6 +189,7 @@ def _calibrate(args, rig, profile) -> int:
     gray = _read_frame(args.frame, rig.omni.image_size) if args.frame else None
     obs = parse_observations(_read_json(args.observations), rig, direction, source=args.observations)
     check_setup(obs, rig, args.observations)
+    check_limits(obs, prof, args.observations)
 
     rim = edges = rim_report = None
     if gray is None:

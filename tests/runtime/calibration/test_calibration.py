@@ -305,3 +305,16 @@ def test_calibrate_with_the_real_frame_and_its_ocamcalib_file(tmp_path, capsys):
     assert oc["center_offset_px"] < 15 and abs(oc["radius_minus_file_rim_px"]) < 20
     assert "centre" in stdout and (out / "rim.png").is_file()
     assert load_rig(out / "calibrated.toml").omni.model == "ocamcalib"
+
+
+def test_a_reading_at_the_ptzs_limit_is_refused(tmp_path, capsys):
+    """A mark below the PTZ's lowest tilt: the device stops at -30 deg and reports that; taken as an aim at
+    the mark it would bias the rig (docs/console.md, the assistant's benchmark), so the fit refuses it."""
+    obs = _bad_observations(tmp_path, lambda d: d["positions"][2]["aims"][0].update(tilt_deg=-30.0))
+    code, _, err = _run(capsys, "--config", PAPER, "--observations", obs, "--out", tmp_path / "out",
+                        "--ptz-profile", "sony_evi_d70")
+    assert code == 2 and err.strip().count("\n") == 0, err
+    assert "position 3's aim at 0 m reads tilt -30 deg, the PTZ's tilt limit (-30 deg)" in err, err
+    assert not (tmp_path / "out").exists()
+    code, _, err = _run(capsys, "--config", PAPER, "--observations", obs, "--out", tmp_path / "out2")
+    assert code == 0, err  # without a profile nothing says where the limits are
