@@ -139,16 +139,14 @@ def check_limits(obs: Observations, profile, source: str) -> None:
     if profile is None:
         return
     for axis, readings in (("pan", obs.pan), ("tilt", obs.tilt)):
-        if axis == "pan" and profile.pan_continuous:
-            continue
-        sec = getattr(profile, axis)
+        per_deg = getattr(profile, axis).units_per_deg
         for j, v in enumerate(np.degrees(np.asarray(readings))):
-            at = [lim for lim in sec.limits_deg if abs(v - lim) * sec.units_per_deg <= 1.0]
-            if at:
+            limit = profile.at_limit(axis, v * per_deg)
+            if limit is not None:
                 k, h = int(obs.position[j]), float(obs.height[j])
                 raise CalibrationError(
                     f"{source}: position {k + 1}'s aim at {h:g} m reads {axis} {v:g} deg, the PTZ's {axis} limit "
-                    f"({at[0]:g} deg): it stopped there, not on the mark; leave that aim out (a mark it cannot centre)")
+                    f"({limit:g} deg): it stopped there, not on the mark; leave that aim out (a mark it cannot centre)")
 
 
 def check_fit(fit: RigFit, max_sigma_m: float = MAX_SIGMA_M, max_sigma_deg: float = MAX_SIGMA_DEG) -> str | None:

@@ -70,11 +70,9 @@ class CalibrationAssistant:
         except (PtzError, TimeoutError) as exc:
             raise ValueError(f"the PTZ did not say where it is: {exc}") from None
         for k, axis in enumerate(("pan", "tilt")):
-            limits = self.profile.limits_units(axis)
-            at = [u for u in limits if abs(pos.units[k] - u) <= 1]
-            if at and not (axis == "pan" and self.profile.pan_continuous):
-                deg = at[0] / getattr(self.profile, axis).units_per_deg
-                raise ValueError(f"the PTZ stands at its {axis} limit ({deg:g} deg): its crosshair cannot be on a "
+            limit = self.profile.at_limit(axis, pos.units[k])
+            if limit is not None:
+                raise ValueError(f"the PTZ stands at its {axis} limit ({limit:g} deg): its crosshair cannot be on a "
                                  "mark beyond it; choose a mark it can centre")
         aim = {"height_m": round(height_m, 4), "pan_deg": round(pos.units[0] / self.profile.pan.units_per_deg, 4),
                "tilt_deg": round(pos.units[1] / self.profile.tilt.units_per_deg, 4)}

@@ -286,6 +286,14 @@ class DeviceProfile(Section):
         sec = getattr(self, axis)
         return round(sec.limits_deg[0] * sec.units_per_deg), round(sec.limits_deg[1] * sec.units_per_deg)
 
+    def at_limit(self, axis: Literal["pan", "tilt"], units: float) -> float | None:
+        """The limit (device deg) that a position of ``axis`` (device units) stands at, within a unit: where a
+        device stops when sent beyond its range; ``None`` inside it (and for a pan that turns all the way)."""
+        if axis == "pan" and self.pan_continuous:
+            return None
+        sec = getattr(self, axis)
+        return next((lim for lim in sec.limits_deg if abs(units - lim * sec.units_per_deg) <= 1.0), None)
+
     # ONVIF's generic spaces: pan and tilt x in [-1, 1] span the device's range linearly, zoom x in [0, 1]
     # spans the lens (ONVIF_ZOOM_UNITS units). Relative moves use the same scale (a full sweep is 2).
 

@@ -51,6 +51,18 @@ def test_clamping_is_reported_per_axis():
         p.to_device(float("nan"), 0.0, 1.0)
 
 
+def test_a_clamped_position_is_at_its_limit():
+    """Where a device stops when sent beyond its range is at a limit (within a unit); inside it is not."""
+    p = default_profile("visca")
+    t = p.to_device(math.radians(175), math.radians(-45), 2.0)
+    assert p.at_limit("tilt", t.tilt) == p.tilt.limits_deg[0] and p.at_limit("pan", t.pan) == p.pan.limits_deg[1]
+    assert p.at_limit("tilt", t.tilt + 2) is None and p.at_limit("tilt", 0) is None
+    turning = copy.deepcopy(profile_mapping("visca"))
+    turning["pan"]["limits_deg"] = [-180.0, 180.0]
+    q = parse_profile(turning)
+    assert q.pan_continuous and q.at_limit("pan", q.limits_units("pan")[1]) is None
+
+
 def test_mounting_maps_geometry_to_device_angles():
     m = profile_mapping("visca")
     m["mounting"] = {"pan_zero_deg": 90.0, "pan_direction": -1, "tilt_zero_deg": 5.0, "tilt_direction": -1}
