@@ -140,10 +140,9 @@ class MqttPublisher:
 
     def close(self, timeout: float = 2.0) -> None:
         """Say ``offline``, let the queued messages out (at most ``timeout`` s), disconnect."""
+        self._closing = True  # the disconnect that follows is ours: no warning
         if self.connected:
-            self._closing = True
             self.client.publish(self.status_topic, "offline", qos=1, retain=True).wait_for_publish(timeout)
-        self._closing = True
         self.client.disconnect()
         self.client.loop_stop()
 
