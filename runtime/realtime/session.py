@@ -11,6 +11,7 @@ whatever ``video`` says, and the console's snapshot is taken after it on the dra
 
 from __future__ import annotations
 
+import gc
 import json
 import math
 import sys
@@ -214,10 +215,16 @@ def run_session(rig: Rig, source: Source, out: Path, *, links: list[PtzLink], co
                 hooks=hooks, control_hooks=control_hooks, screenshot_at=screenshot_at, console=console, mqtt=mqtt)
         setup_s = time.monotonic() - t0
         loop.install_signal_handlers()  # until the outputs are staged: a second signal hurries, never discards
+        # what start-up built (JAX, the compiled programs, the world) lives as long as the run: out of the
+        # collector's sight, a full collection scans only what the loop makes (it scanned all of it, 0.1-0.35 s
+        # with every thread held, collecting nothing: the frames dropped mid-run, docs/runtime.md)
+        gc.collect()
+        gc.freeze()
         try:
             summary = _finish(loop, stage, writer, recorder, source, setup_s, n_bg, first, console,
                               mqtt, extra, finish)
         finally:
+            gc.unfreeze()
             loop.restore_signal_handlers()
     if loop.hurried_by is not None:  # the outputs are in place; say that they were cut short
         exc = Interrupted(loop.hurried_by)
