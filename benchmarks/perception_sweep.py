@@ -15,6 +15,7 @@ Run:
     .venv/bin/python benchmarks/perception_sweep.py sweep --scenes three_people six_people \\
         --seeds 5000-5009 --frames 600 --json out/sweep.json
     .venv/bin/python benchmarks/perception_sweep.py folders R:D
+    .venv/bin/python benchmarks/perception_sweep.py folders out/keep/*   # runs kept by sweep --keep out/keep
 """
 
 from __future__ import annotations
@@ -75,16 +76,17 @@ def read_jsonl(path: Path) -> list[dict]:
 
 
 def folders(args) -> list[dict]:
-    from runtime.files import load_rig
+    from runtime.files import load_rig, load_scenario
 
     rows = []
     for pair in args.pairs:
-        r, d = (Path(p) for p in pair.split(":", 1))
+        r, d = (Path(p) for p in (pair.split(":", 1) if ":" in pair else (pair, pair)))
         world = json.loads((r / "world.json").read_text())
         summary = json.loads((d / "summary.json").read_text())
-        rig = load_rig(summary["config"])
+        rig = load_scenario(summary["scenario"])[0] if "scenario" in summary else load_rig(summary["config"])
         learning = summary.get("learning_frames", list(range(summary.get("background_frames", 30))))
-        s = score_lines(rig, read_jsonl(r / "truth.jsonl"), world, read_jsonl(d / "detections.jsonl"), learning)
+        s = score_lines(rig, read_jsonl(r / "truth.jsonl"), world, read_jsonl(d / "detections.jsonl"), learning,
+                        summary.get("moved_furniture", ()))
         rows.append({"scene": world["scenario"], "seed": world["seed"], **s})
     return rows
 
@@ -114,11 +116,29 @@ def sweep(args) -> list[dict]:
         result = detect_frames(rig, frames(), fps=float(sc.fps))
         for item in result:
             det_lines.append({"frame": item.index, "people": item.people})
-        s = score_lines(rig, truth_lines, world_summary(world), det_lines, result.learning_frames,
-                        getattr(world, "moved_furniture", ()))
+        summary = world_summary(world)
+        moved = getattr(world, "moved_furniture", ())
+        s = score_lines(rig, truth_lines, summary, det_lines, result.learning_frames, moved)
+        if args.keep:
+            keep_run(args.keep / f"{scene}_{seed}", summary, truth_lines, det_lines, result.learning_frames, moved,
+                     Path("configs/scenarios") / f"{scene}.toml")
         rows.append({"scene": scene, "seed": seed, "seconds": time.perf_counter() - t0,
                      "life": result.perception.keeper.summary(), **s})
     return rows
+
+
+def keep_run(folder: Path, world: dict, truth_lines: list[dict], det_lines: list[dict], learning_frames,
+             moved_furniture, scenario: Path) -> None:
+    """One run's truth and detections in ``folder`` as ``omnijax render`` and ``omnijax detect`` write them
+    (``world.json``, ``truth.jsonl``; ``summary.json``, ``detections.jsonl``), so ``folders FOLDER:FOLDER``
+    scores them again (a changed classifier) without rendering or detecting."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "world.json").write_text(json.dumps(world, default=float) + "\n")
+    summary = {"scenario": str(scenario.resolve()), "learning_frames": [int(f) for f in learning_frames],
+               "moved_furniture": np.asarray(moved_furniture, float).reshape(-1, 2).tolist()}
+    (folder / "summary.json").write_text(json.dumps(summary) + "\n")
+    for name, lines in (("truth.jsonl", truth_lines), ("detections.jsonl", det_lines)):
+        (folder / name).write_text("".join(json.dumps(line, default=float) + "\n" for line in lines))
 
 
 def table(rows: list[dict]) -> str:
@@ -171,8 +191,12 @@ def main() -> int:
     s.add_argument("--scenes", nargs="+", default=["three_people", "six_people"])
     s.add_argument("--seeds", type=seeds_arg, default=seeds_arg("5000-5009"), help="e.g. 5000-5009 or 1,2,7")
     s.add_argument("--frames", type=int, default=600)
+    s.add_argument("--keep", type=Path, metavar="DIR",
+                   help="write each run's truth and detections to DIR/SCENE_SEED (score them again with "
+                        "folders DIR/SCENE_SEED:DIR/SCENE_SEED)")
     f = sub.add_parser("folders", help="score omnijax render + omnijax detect outputs")
-    f.add_argument("pairs", nargs="+", metavar="RENDER:DETECT")
+    f.add_argument("pairs", nargs="+", metavar="RENDER:DETECT",
+                   help="render and detect output folders; one folder alone: a run kept by sweep --keep")
     for p in (s, f):
         p.add_argument("--json", type=Path, help="write every row here")
         p.add_argument("--records", type=Path,

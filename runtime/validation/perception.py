@@ -36,11 +36,13 @@ misses
                        learnt from and has not moved yet: no learning frame saw the floor under them, so
                        no change detector can see them until they move (standing_start: a first pause
                        longer than the learning)
-  ``merged``           another person within :data:`SAME_SECTOR_RAD` of azimuth was detected (two
-                       people in one sector, one detection)
-  ``ghost_sector``     a false alarm's sector covers the person's azimuth (merged with a ghost)
+  ``floor_coloured``   the person is dressed close to the floor's colour (the chromaticity measure sees
+                       their skin and hair at most; before ``merged``: a person nobody can see is not
+                       missed for the company they keep)
+  ``merged``           the run of lines of a detection matched to another person covers the person's
+                       azimuth (within :data:`SECTOR_MARGIN_RAD`): two people, one detection
+  ``ghost_sector``     a false alarm's run covers the person's azimuth (merged with a ghost)
   ``absorbed_standing`` the person has stood still for :data:`PAUSE_S` or more
-  ``floor_coloured``   the person is dressed close to the floor's colour
   ``far_field``        the foot beyond :data:`FAR_M`
   ``other``
 
@@ -69,9 +71,10 @@ from scipy.optimize import linear_sum_assignment
 #: Matching gate on the floor (m), as the demo's scorer.
 GATE_M = 0.5
 #: Cause classifier: a second detection of one person within FRAGMENT_M (m); a person's place
-#: within SITE_M (m); a pause of PAUSE_S (s) or more; two people within SAME_SECTOR_RAD (rad) of
-#: azimuth share a sector; the far field starts FAR_M (m) from the camera axis.
-FRAGMENT_M, SITE_M, PAUSE_S, SAME_SECTOR_RAD, FAR_M = 0.7, 0.6, 1.0, 0.35, 2.7
+#: within SITE_M (m); a pause of PAUSE_S (s) or more; a detection's run of lines covers a person's
+#: azimuth within SECTOR_MARGIN_RAD (rad) of its ends; the far field starts FAR_M (m) from the camera
+#: axis.
+FRAGMENT_M, SITE_M, PAUSE_S, SECTOR_MARGIN_RAD, FAR_M = 0.7, 0.6, 1.0, 0.05, 2.7
 #: A ghost's clock starts when its person is LEFT_M (m) away.
 LEFT_M = 1.0
 #: A person counts as standing at a place in the learning frames when there in this share of them.
@@ -85,7 +88,7 @@ RANGE_BANDS = (0.0, 1.5, 2.5, 3.5, math.inf)
 #: The chi-square(1) 99 % point: a Gaussian coordinate's NEES exceeds it with probability 0.01.
 NEES_99 = 6.63
 FA_CAUSES = ("fragment", "ghost_learning", "ghost_pause", "moved_object", "shadow", "far_field", "other")
-MISS_CAUSES = ("never_seen_free", "merged", "ghost_sector", "absorbed_standing", "floor_coloured", "far_field", "other")
+MISS_CAUSES = ("never_seen_free", "floor_coloured", "merged", "ghost_sector", "absorbed_standing", "far_field", "other")
 
 
 def match_feet(z: np.ndarray, foot: np.ndarray, gate_m: float = GATE_M) -> list[tuple[int, int, float]]:
@@ -210,6 +213,13 @@ def _coloured_lamps(world: dict) -> np.ndarray:
     out = [q["position_m"] for q in lamps
            if np.abs(chroma(q["spectrum"]) - chroma(ambient)).max() > SPECTRUM_CHROMA]
     return np.asarray(out, float).reshape(-1, 3)
+
+
+def _covers(detection: dict, theta: float) -> bool:
+    """Whether ``detection``'s run of lines (``theta_l`` .. ``theta_r``, about ``theta_f``) covers the
+    azimuth ``theta`` within :data:`SECTOR_MARGIN_RAD`."""
+    half = 0.5 * abs(float(wrap_pi(detection["theta_r"] - detection["theta_l"]))) + SECTOR_MARGIN_RAD
+    return bool(abs(wrap_pi(detection["theta_f"] - theta)) <= half)
 
 
 def _segment_distance(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
@@ -338,19 +348,15 @@ class PerceptionScore:
     def _miss_cause(frame, q, persons, det_of, people, unmatched, history) -> str:
         if history is not None and history.never_seen_free(frame, q["id"]):
             return "never_seen_free"
-        for c, other in enumerate(persons):
-            if other is not q and c in det_of and abs(wrap_pi(other["theta_f"] - q["theta_f"])) <= SAME_SECTOR_RAD:
-                return "merged"
-        for k in unmatched:
-            d = people[k]
-            half = 0.5 * abs(float(wrap_pi(d["theta_r"] - d["theta_l"]))) + 0.05
-            if abs(wrap_pi(d["theta_f"] - q["theta_f"])) <= half:
-                return "ghost_sector"
-        if history is not None:
-            if history.still_for(frame, q["id"]) >= PAUSE_S:
-                return "absorbed_standing"
-            if history.floor_like[q["id"]]:
-                return "floor_coloured"
+        if history is not None and history.floor_like[q["id"]]:
+            return "floor_coloured"
+        if any(c in det_of and _covers(people[det_of[c]], q["theta_f"]) for c, other in enumerate(persons)
+               if other is not q):
+            return "merged"
+        if any(_covers(people[k], q["theta_f"]) for k in unmatched):
+            return "ghost_sector"
+        if history is not None and history.still_for(frame, q["id"]) >= PAUSE_S:
+            return "absorbed_standing"
         return "far_field" if np.hypot(*q["foot_m"]) > FAR_M else "other"
 
     def nees_figures(self) -> dict:

@@ -131,3 +131,22 @@ def test_a_false_alarm_in_a_coloured_shadow(spectrum, cause):
     z = np.array([[1.0, 0.0], [1.8, 0.1], [1.8, 1.0]])
     out = score.add_frame(3, _truth(3, feet[3]), _people(3), z, np.ones((3, 2)), hist)
     assert [x["cause"] for x in out["false"]] == [cause, "other"]
+
+
+def test_merged_means_another_detection_covers_the_missed_person():
+    """Two people at (2, 0) (azimuth 0) and (1, 0.3) (azimuth 0.29 rad), only the first detected.
+    Its run 0.10 rad wide holds azimuth 0 only: the second person is missed for no company ('other');
+    a run of 0.6 rad covers both ('merged'). The same second person dressed like the floor is
+    'floor_coloured' either way: the measure cannot see them, whoever stands beside them."""
+    feet = np.array([[[2.0, 0.0], [1.0, 0.3]]] * 4)
+    theta = [0.0, float(np.arctan2(0.3, 1.0))]
+    for half, floor_like, cause in [(0.05, False, "other"), (0.3, False, "merged"),
+                                    (0.05, True, "floor_coloured"), (0.3, True, "floor_coloured")]:
+        hist = _history(feet, np.ones((4, 2), bool))
+        hist.floor_like[1] = floor_like
+        truth = _truth(3, feet[3])
+        for q, t in zip(truth["persons"], theta):
+            q["theta_f"] = t
+        people = [{"r_f": 50.0, "theta_f": 0.0, "theta_l": -half, "theta_r": half}]
+        out = PerceptionScore().add_frame(3, truth, people, np.array([[2.0, 0.0]]), np.ones((1, 2)), hist)
+        assert out["missed"] == [{"id": 1, "cause": cause}], (half, floor_like)
