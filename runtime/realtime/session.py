@@ -220,10 +220,13 @@ def run_session(rig: Rig, source: Source, out: Path, *, links: list[PtzLink], co
         # with every thread held, collecting nothing: the frames dropped mid-run, docs/runtime.md)
         gc.collect()
         gc.freeze()
+        watch = CollectorWatch()
+        gc.callbacks.append(watch)
         try:
             summary = _finish(loop, stage, writer, recorder, source, setup_s, n_bg, first, console,
-                              mqtt, extra, finish)
+                              mqtt, extra, finish, watch)
         finally:
+            gc.callbacks.remove(watch)
             gc.unfreeze()
             loop.restore_signal_handlers()
     if loop.hurried_by is not None:  # the outputs are in place; say that they were cut short
@@ -233,8 +236,31 @@ def run_session(rig: Rig, source: Source, out: Path, *, links: list[PtzLink], co
     return summary
 
 
+class CollectorWatch:
+    """Python's garbage collections while the loop runs (a ``gc.callbacks`` entry): per generation, how
+    many and the longest (ms); with what start-up left frozen out of their sight (``gc.freeze``). A full
+    collection holds every thread; before the freeze they scanned all that start-up built and grew to
+    0.35 s mid-run (docs/runtime.md). ``summary()`` is summary.json's ``gc``."""
+
+    def __init__(self):
+        self.frozen = gc.get_freeze_count()
+        self.count, self.max_ms, self._t0 = [0, 0, 0], [0.0, 0.0, 0.0], 0.0
+
+    def __call__(self, phase: str, info: dict) -> None:
+        if phase == "start":
+            self._t0 = time.perf_counter()
+            return
+        g = info["generation"]
+        self.count[g] += 1
+        self.max_ms[g] = max(self.max_ms[g], 1e3 * (time.perf_counter() - self._t0))
+
+    def summary(self) -> dict:
+        return {"frozen_objects": self.frozen, "collections": list(self.count),
+                "max_ms": [round(v, 3) for v in self.max_ms]}
+
+
 def _finish(loop: RealTimeLoop, stage: Path, writer, recorder, source: Source, setup_s: float, n_bg: int, first: int,
-            console, mqtt, extra: dict | None, finish: Callable | None) -> dict:
+            console, mqtt, extra: dict | None, finish: Callable | None, watch: CollectorWatch) -> dict:
     """Run the loop until it stops, send the PTZ home, close the writers and write ``summary.json`` into
     ``stage``; returns the summary. A second Ctrl-C or SIGTERM meanwhile (:attr:`RealTimeLoop.hurry`) cuts the
     drawing and the wait for the PTZ short; what was recorded is written all the same."""
@@ -264,6 +290,7 @@ def _finish(loop: RealTimeLoop, stage: Path, writer, recorder, source: Source, s
     video_counters = _source_counters(source)  # a network stream: reconnects, drops, outage
     if video_counters is not None:
         summary["stream"] = video_counters
+    summary["gc"] = watch.summary()
     summary.update(extra or {})
     if finish is not None:
         finish(summary)

@@ -130,6 +130,11 @@ def test_demo_contract(demo_out):
     assert {(c["rule"], c["p_contain"]) for c in pt["curve"]} == {(r, p) for r in ("paper", "calibrated")
                                                                  for p in (0.9, 0.95, 0.99)}
     assert s["ptz_homed"] and s["emulator"]["pan_deg"] == 0 and s["emulator"]["zoom"] == 1
+    # start-up's objects are frozen out of the collector's sight: no collection in the loop scans them
+    # (before, a full one grew to 352 ms mid-run and dropped frames; docs/runtime.md)
+    gc = s["gc"]
+    assert gc["frozen_objects"] > 10_000 and len(gc["collections"]) == len(gc["max_ms"]) == 3
+    assert gc["collections"][0] > 0 and max(gc["max_ms"]) < 250.0  # a full one was 352 ms before
     log = [json.loads(line) for line in (demo_out / "log.jsonl").read_text().splitlines()]
     assert len(log) == s["frames"] + s["counts"]["broken"] + s["counts"]["wrong_size"]
     video = cv2.VideoCapture(str(demo_out / s["outputs"]["video"]))
