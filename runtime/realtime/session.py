@@ -385,6 +385,9 @@ def _start_on(capture: Capture | None, rig: Rig, source: Source, stage: Path, *,
     blank_dets = jax.device_get(loop.warm_up())
     if drawn:
         annot.warm_up(np.zeros((H, W, 3), np.uint8), blank_dets)
+    for hook in hooks:  # what runs on the drawing thread compiles now, not mid-run (the demo's scorer)
+        if hasattr(hook, "warm_up"):
+            hook.warm_up()
     return loop, annot, writer, recorder, first
 
 

@@ -127,6 +127,18 @@ class DemoScorer:
         self.nees_over = 0
         self.arrived_inside = np.zeros((len(P_CONTAIN), len(RULES)), int)
 
+    def warm_up(self) -> None:
+        """Compile the batch scorers (:func:`_trials`, :func:`_pointing_trials`, one shape each) for every
+        PTZ before the loop starts: the first full batch comes hundreds of frames in, on the drawing thread,
+        and tracing and compiling them there held it 1.1-1.4 s (3.7 s on a cold compilation cache, when the
+        drawing queue filled and 42 frames went undrawn and unscored; docs/runtime.md)."""
+        n, nr = BATCH, len(RULES)
+        a = lambda *shape, v=1.0: jnp.asarray(np.full(shape, v))  # staged from the host as the batches are
+        for rig, true_rig in zip(self.rigs, self.true_rigs):
+            _trials(true_rig, a(n), a(n, v=-0.3), a(n, nr), a(n, 3), a(n, v=0.1))
+            _pointing_trials(rig, true_rig, a(n), a(n, v=-0.3), jnp.asarray(np.tile(1e-4 * np.eye(4), (n, 1, 1))),
+                             a(n, v=3.0), a(n, v=3.0), a(n, 2), a(n, v=1.75), a(n, v=0.1))
+
     def __call__(self, record, frame, dets, z, tracks, commands, status=None, *_) -> dict:
         truth = self.source.take_truth(frame.index)
         if truth is None:

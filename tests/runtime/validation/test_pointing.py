@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 from types import SimpleNamespace
 
@@ -45,7 +46,7 @@ def test_head_direction_puts_the_head_at_the_frame_centre(paper_rig):
         assert np.abs(np.asarray(view.offset)).max() < 1e-6 and bool(view.inside)
 
 
-def test_demo_scorer_pointing_on_arrived_frames(paper_rig):
+def test_demo_scorer_pointing_on_arrived_frames(paper_rig, caplog):
     # a person standing at (2, 1) of prior height and head; 512 arrived frames whose held pan/tilt scatter
     # about the true head direction by exactly the held aim's covariance (seed 1): NEES per degree of freedom
     # within 4 standard errors (0.044) of 1; containment at every p_contain within 4 binomial standard errors
@@ -53,7 +54,7 @@ def test_demo_scorer_pointing_on_arrived_frames(paper_rig):
     # track far from anybody is counted, not scored
     from omnijax import aim_at_floor
     from runtime.realtime.loop import Command
-    from runtime.validation.scoring import DemoScorer
+    from runtime.validation.scoring import BATCH, DemoScorer
 
     rig = paper_rig
     foot = np.array([2.0, 1.0])
@@ -64,6 +65,7 @@ def test_demo_scorer_pointing_on_arrived_frames(paper_rig):
         people=SimpleNamespace(H_p=np.array([float(rig.person.H_p)]), R_h=np.array([float(rig.person.R_h)]),
                                head_z=np.array([float(rig.person.H_p - rig.person.R_h)])))
     scorer = DemoScorer(world, source=None)
+    scorer.warm_up()  # the session does this before the loop: scoring below must compile nothing
     aim = jax.device_get(aim_at_floor(rig, jnp.asarray(foot), 1e-3 * jnp.eye(2)))
     C = np.asarray(aim.covariance.cov)[:2, :2]
     e = np.random.default_rng(1).multivariate_normal([0, 0], C, 512)
@@ -72,7 +74,12 @@ def test_demo_scorer_pointing_on_arrived_frames(paper_rig):
         pan, tilt = float(aim.pointing.pan) + e[k, 0], float(aim.pointing.tilt) + e[k, 1]
         cmd = Command(track=7, pan=pan, tilt=tilt, zoom=1.0, zooms={}, sd_pan=0.0, sd_tilt=0.0, sent=True,
                       t_predicted=k / 25, aimed=aim)
-        scorer._add_arrived(k, 0, cmd, track)
+        if k == BATCH - 1:  # the first full batch is scored on the drawing thread: no tracing or compiling there
+            with jax.log_compiles(), caplog.at_level(logging.WARNING, logger="jax"):
+                scorer._add_arrived(k, 0, cmd, track)
+            assert not [r for r in caplog.records if "_pointing_trials" in r.getMessage()]
+        else:
+            scorer._add_arrived(k, 0, cmd, track)
     scorer._add_arrived(0, 0, cmd, [SimpleNamespace(id=7, position=foot + 3.0)])
     s = scorer.pointing()
     assert s["frames"] == 512 and s["no_person"] == 1
