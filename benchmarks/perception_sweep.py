@@ -132,11 +132,13 @@ def keep_run(folder: Path, world: dict, truth_lines: list[dict], det_lines: list
     """One run's truth and detections in ``folder`` as ``omnijax render`` and ``omnijax detect`` write them
     (``world.json``, ``truth.jsonl``; ``summary.json``, ``detections.jsonl``), so ``folders FOLDER:FOLDER``
     scores them again (a changed classifier) without rendering or detecting."""
+    from runtime.output import dumps  # as omnijax render writes world.json
+
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "world.json").write_text(json.dumps(world, default=float) + "\n")
-    summary = {"scenario": str(scenario.resolve()), "learning_frames": [int(f) for f in learning_frames],
-               "moved_furniture": np.asarray(moved_furniture, float).reshape(-1, 2).tolist()}
-    (folder / "summary.json").write_text(json.dumps(summary) + "\n")
+    (folder / "world.json").write_text(dumps(world) + "\n")
+    summary = {"scenario": str(scenario.resolve()), "learning_frames": list(learning_frames),
+               "moved_furniture": np.asarray(moved_furniture, float).reshape(-1, 2)}
+    (folder / "summary.json").write_text(dumps(summary) + "\n")
     for name, lines in (("truth.jsonl", truth_lines), ("detections.jsonl", det_lines)):
         (folder / name).write_text("".join(json.dumps(line, default=float) + "\n" for line in lines))
 

@@ -350,8 +350,7 @@ class PerceptionScore:
             return "never_seen_free"
         if history is not None and history.floor_like[q["id"]]:
             return "floor_coloured"
-        if any(c in det_of and _covers(people[det_of[c]], q["theta_f"]) for c, other in enumerate(persons)
-               if other is not q):
+        if any(_covers(people[r], q["theta_f"]) for c, r in det_of.items() if persons[c] is not q):
             return "merged"
         if any(_covers(people[k], q["theta_f"]) for k in unmatched):
             return "ghost_sector"
