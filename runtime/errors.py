@@ -67,10 +67,24 @@ def _interrupt(signum: int, frame) -> None:
     raise Interrupted(name)
 
 
+#: True while the garbage collector runs (between its "start" and "stop" callbacks), while
+#: :func:`interrupt_handlers` are in place: whatever Python code it runs meanwhile (a weakref's
+#: callback, a finaliser) drops exceptions.
+_collecting = False
+
+
+def _collector_phase(phase: str, info) -> None:
+    global _collecting
+    _collecting = phase == "start"
+
+
 def _swallows(frame) -> bool:
-    """Whether the code ``frame`` runs in drops exceptions: a garbage collector's callback (JAX has one:
-    a SIGTERM that landed in it let ``omnijax render`` run to the end and write its outputs) or a
-    ``__del__``."""
+    """Whether the code ``frame`` runs in drops exceptions: anything the garbage collector runs (its
+    callbacks, JAX has one: a SIGTERM that landed in it let ``omnijax render`` run to the end and write
+    its outputs; the weakref callbacks of the garbage it frees: a WeakKeyDictionary's removal dropped
+    one in the test suite) or a ``__del__``."""
+    if _collecting:
+        return True
     callbacks = {getattr(cb, "__code__", None) for cb in gc.callbacks}
     while frame is not None:
         if frame.f_code in callbacks or frame.f_code.co_name == "__del__":
@@ -87,11 +101,16 @@ def interrupt_handlers() -> Iterator[None]:
         yield
         return
     old = {sig: signal.signal(sig, _interrupt) for sig in SIGNALS}
+    ours = _collector_phase not in gc.callbacks  # an enclosing block's stays until that block ends
+    if ours:
+        gc.callbacks.insert(0, _collector_phase)  # first: "start" is seen before any other callback runs
     try:
         yield
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
+        if ours:
+            gc.callbacks.remove(_collector_phase)
 
 
 @contextlib.contextmanager

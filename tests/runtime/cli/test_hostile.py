@@ -272,6 +272,35 @@ def test_a_signal_inside_a_garbage_collector_callback_still_interrupts():
     assert sent and info.value.signame == "SIGTERM"
 
 
+def test_a_signal_handled_inside_a_weakref_callback_of_the_collector_still_interrupts():
+    """The collector also runs weakref callbacks (a WeakKeyDictionary's removal, of garbage that other
+    code left in a cycle); a signal whose handler runs there would be printed and dropped as well. Seen
+    once in the suite: the SIGTERM sent in a gc callback was handled in such a weakref callback later in
+    the same collection."""
+    import gc
+    import weakref
+
+    class Node:
+        pass
+
+    def removed(_ref):
+        if not sent:
+            sent.append(True)
+            os.kill(os.getpid(), signal.SIGTERM)
+        sum([k for k in range(100)])  # Python code: the handler runs here, inside the weakref callback
+
+    sent: list[bool] = []
+    gc.collect()
+    node = Node()
+    node.self = node  # a cycle: only the collector frees it, and runs the callback while it does
+    ref = weakref.ref(node, removed)
+    del node
+    with pytest.raises(Interrupted) as info, interrupt_handlers():
+        gc.collect()
+        time.sleep(5)
+    assert sent and info.value.signame == "SIGTERM" and ref() is None
+
+
 def test_demo_interrupted_during_start_up_says_so_and_writes_nothing(tmp_path, monkeypatch, capsys):
     import omnijax.world
 
