@@ -27,7 +27,11 @@ or one behind the other as the camera sees them, and the paper's estimate then f
    - its samples are *explained*: over its lines (and at least the model's width around its
      centre) and its radii (from its foot to the top of a person :data:`TALL_SIGMAS` standard
      deviations taller than the prior), d^2 is set to the background's mean, so that no later
-     step finds the same person again and the next person is sought in what is left.
+     step finds the same person again and the next person is sought in what is left;
+   - once all are found, a person whose change on their centre line runs on inward of eq 12's foot
+     (every other person's samples set aside) is taller than the prior's extent: eq 12 kept their head
+     and put the foot outward, so it moves to where that change starts (:func:`_taller`, within
+     :data:`TALL_SIGMAS` of the prior's height; docs/detection.md, "Taller than the prior").
 3. Two people's feet are at least a shoulder width apart; two detections whose feet are closer
    than :data:`MERGE_M` on the floor are one person's fragments and the weaker goes, and a run of
    fewer than :data:`MIN_RUN_LINES` lines (or one found by the head alone narrower than
@@ -77,6 +81,21 @@ VALLEY = 0.6
 #: Explained: the model's width plus MARGIN_LINES each side; radii from MARGIN_R before the foot
 #: to MARGIN_R past the top of a person TALL_SIGMAS prior standard deviations taller.
 MARGIN_LINES, MARGIN_R, TALL_SIGMAS = 1, 3, 3.0
+#: Someone taller than the prior (:func:`_taller`): eq 12 with the prior's extent keeps their head and puts
+#: the foot where a person of the prior's height with that head's top would stand, outward of the true
+#: one, while the samples inward of it still hold their legs' change (weak, for someone dressed like the
+#: floor: three_people and six_people 9182, a person 2.5 standard deviations tall placed 0.5-0.6 m out).
+#: A sample of the windowed profile on the person's centre line counts as the person's where the mean of
+#: three exceeds ``dps + TALL_CHARGE c_min`` a sample (every other person's samples set aside); the
+#: foot moves to where an unbroken run of such samples starts, counted from TALL_EDGE samples inward of
+#: eq 12's foot (the edge of anyone's image there, the body's round base over the window's lines, is
+#: eq 12's own), if the run reaches TALL_MIN samples inward of it (about 1.5 standard deviations of the
+#: prior's height at 2-3 m; a strong person's spill past eq 12's inner end is shorter) and ends within
+#: the extent of a person TALL_SIGMAS taller with the same head's top (one that runs on is something
+#: else inward: a shadow, someone undetected, and the foot stays).
+TALL_CHARGE = 0.25
+TALL_EDGE = 2
+TALL_MIN = 6
 #: Feet closer than this on the floor (m) are one person's (two people's are a shoulder width apart).
 MERGE_M = 0.45
 #: Fewest lines in a person's run: a body spans at least 5 lines (2 asin(rho / R) at the room's far
@@ -233,6 +252,7 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     reach = _wrap(T, polar.window_reach)
     n_all = polar.window_ok_prefix.astype(d2.dtype)
     dps = dof_per_sample
+    d2_frame = d2
 
     def figures(d2, explained, start, B):
         """Lines ``start .. start + B - 1`` (mod T) and their figures: best foot, samples, unexplained
@@ -329,7 +349,43 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     people = jax.tree.map(lambda v: jnp.zeros((max_people, *v.shape), v.dtype).at[0].set(v), rec)
     state = (jnp.asarray(1), d2, explained, fig, people, rec["valid"])
     people = jax.lax.while_loop(lambda s: (s[0] < max_people) & s[5], body, state)[4]
-    return People(**people)
+    return _taller(polar, d2_frame, ok, People(**people), dps, dps + TALL_CHARGE * c_min, sigma_H_p)
+
+
+def _taller(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T R"], people: People, dps, level,
+            sigma_H_p) -> People:
+    """Each person's foot moved inward from eq 12's to where their change starts on their centre line, for
+    someone taller than the prior (:data:`TALL_CHARGE` and after), with every other person's explained
+    samples at the background's mean ``dps`` (someone nearer on the same azimuth is not this person's
+    legs); ``level`` the change a sample that counts as the person's. Their explained region (what the
+    background's life repairs if they are a ghost) grows inward with the foot. Beyond the paper."""
+    T, R = d2.shape
+    reach = _wrap(T, polar.window_reach)
+    out, r_idx = polar.hyp_out, jnp.arange(R)
+    K = people.valid.shape[0]
+    e = people.explained
+    grown = (out[people.i][:, None] - out[None]) <= TALL_SIGMAS * sigma_H_p * polar.hyp_dout_dH[None]
+    lowest = jnp.argmax(grown & polar.hyp_ok[None] & (r_idx[None] >= polar.hyp_first), 1)  # tallest allowed
+
+    def one(k):
+        t = jnp.floor(people.centre[k]).astype(jnp.int32)
+        rows = (t - reach + jnp.arange(1 + 2 * reach)) % T
+        other = people.valid & (jnp.arange(K) != k)
+        in_lines = ((rows[None] - e[:, 0, None]) % T <= (e[:, 1] - e[:, 0])[:, None])  # (K, rows)
+        in_radii = (r_idx[None] >= e[:, 2, None]) & (r_idx[None] < e[:, 3, None])  # (K, R)
+        hidden = jnp.any(other[:, None, None] & in_lines[:, :, None] & in_radii[:, None, :], 0)
+        mean = ok[rows]
+        q = _windows(jnp.where(hidden, dps * mean, d2[rows]) - level * mean, polar.window_lines, reach, 1)[0]
+        q = jnp.convolve(q, jnp.ones(3) / 3, mode="same")  # over three samples: a weak change is noisy
+        edge = people.i[k] - TALL_EDGE
+        gap = jnp.max(jnp.where((r_idx < edge) & (q <= 0.0), r_idx, -1))  # the run ends after it
+        j = gap + 1
+        move = people.valid[k] & (j <= people.i[k] - TALL_MIN) & (j >= lowest[k]) & (gap >= 0)
+        return jnp.where(move, j, people.i[k])
+
+    i = jax.vmap(one)(jnp.arange(K))
+    explained = e.at[:, 2].set(jnp.minimum(e[:, 2], jnp.maximum(i - MARGIN_R, 0)))
+    return eqx.tree_at(lambda p: (p.i, p.explained), people, (i.astype(people.i.dtype), explained.astype(e.dtype)))
 
 
 def _distances(xy: Float[Array, "K 2"]) -> Float[Array, "K K"]:

@@ -362,6 +362,47 @@ def test_a_person_dressed_like_the_floor_is_found_by_their_head(paper_detector, 
     assert found(4.0, head_half)[0] == []
 
 
+def test_a_person_taller_than_the_prior_gets_the_foot_where_their_legs_start(paper_detector):
+    """On a table of d^2: someone 2.5 prior standard deviations tall (three_people and six_people 9182's
+    person 0, 1.878 m against 1.75 +- 0.05, dressed like the floor: their legs change d^2 a little, their
+    head a lot) 2.4 m out. Eq 12 with the prior's extent must keep the head, so it puts the foot where a
+    person of the prior's height with that head's top would stand (0.4-0.6 m outward: a miss and a false
+    alarm in every such frame); the legs' weak change inward of that foot moves it back to where the
+    legs start. With nothing inward of the foot (legs that do not change d^2 at all) the foot stays
+    where eq 12 put it, and a person of the prior's height is where eq 12 puts them."""
+    from omnijax.detection._blobs import TALL_SIGMAS
+    from omnijax.detection._detector import find_sectors, locate_people
+
+    det = paper_detector
+    polar = det.polar
+    ok = np.asarray(polar.line_ok, np.float32)
+    step = 2 * np.pi / polar.n_theta
+    i = int(np.argmin(np.abs(np.asarray(polar.hyp_R) - 2.4)))
+    out, r_f = np.asarray(polar.hyp_out), np.asarray(polar.hyp_r_f)
+    half = int(np.round(0.5 * float(polar.hyp_width[i]) / step))
+    c_min = float(det.thresholds.c_min)
+
+    def foot(legs, tall_sigmas):
+        top = int(round(out[i] + tall_sigmas * float(det.sigma_H_p) * float(polar.hyp_dout_dH[i])))
+        head = int(polar.hyp_head[i])
+        d2 = 2.0 * ok
+        d2[100 - half:100 + half + 1, i:head] += legs
+        d2[100 - half:100 + half + 1, head:top] += 30.0
+        d2 = jnp.asarray(d2 * ok)
+        d = locate_people(det, d2, find_sectors(det, d2.sum(-1)))
+        ks = list(np.flatnonzero(np.asarray(d.valid)))
+        assert len(ks) == 1
+        return float(d.r_f[ks[0]])
+
+    assert 2.5 < TALL_SIGMAS
+    truth = float(r_f[i])
+    outward = foot(0.0, 2.5)  # legs that do not show: the head's top and the prior's height decide
+    assert outward - truth > 8.0  # px: 0.4 m and more on the floor
+    assert foot(0.75 * c_min, 2.5) == pytest.approx(truth, abs=1.5)  # weak legs: the foot where they start
+    assert foot(0.75 * c_min, 0.0) == pytest.approx(truth, abs=1.5)  # the prior's height: eq 12's foot
+    assert foot(8.0 * c_min, 0.0) == pytest.approx(truth, abs=1.5)
+
+
 def test_two_people_whose_images_overlap_in_azimuth_are_parted_not_merged(paper_detector):
     """stops_a_minute 9078's two standers on a table of d^2: one 1.25 m out, the other 1.81 m out and 8
     degrees aside, their images overlapping over most of their lines, found as the people stage found
