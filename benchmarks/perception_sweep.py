@@ -87,7 +87,10 @@ def folders(args) -> list[dict]:
         learning = summary.get("learning_frames", list(range(summary.get("background_frames", 30))))
         s = score_lines(rig, read_jsonl(r / "truth.jsonl"), world, read_jsonl(d / "detections.jsonl"), learning,
                         summary.get("moved_furniture", ()))
-        rows.append({"scene": world["scenario"], "seed": world["seed"], **s})
+        # the scene as `sweep` names it (the scenario file's name) where the run says which file it was;
+        # world.json holds only the scenario's display name
+        scene = Path(summary["scenario"]).stem if "scenario" in summary else world["scenario"]
+        rows.append({"scene": scene, "seed": world["seed"], **s})
     return rows
 
 
