@@ -226,14 +226,14 @@ def run(args: argparse.Namespace) -> int:
 
             def finish(summary):
                 scores = scorer.summary(float(rig.p_contain), args.zoom_rule)
-                scores["cameras"] = [{**run, **score, "emulator": emulator.state()} for run, score, emulator in
-                                     zip(summary["cameras"], scores["cameras"], emulators)]
+                scores["cameras"] = [{**run, **score, "emulator": emulator.state(settle_s=1.0)}
+                                     for run, score, emulator in zip(summary["cameras"], scores["cameras"], emulators)]
                 summary.update(scores)
                 summary["scenario"] = {"file": str(scenario), "name": sc.name, "frames": args.frames,
                                        "seed": world.seed, "fps": sc.fps, "pace": args.pace, "ptz_count": K}
                 summary["faults"]["injected"] = plan.describe()
                 summary["faults"]["ptz_unplugged"] = emulators[0].unplugs
-                summary["emulator"] = emulators[0].state()
+                summary["emulator"] = emulators[0].state(settle_s=1.0)
 
             where = ", ".join(emulator.pty for emulator in emulators)
             print(f"omnijax demo: {K} PTZ emulator{'s' if K > 1 else ''} ({profile.name}) on {where}; learning the "

@@ -20,6 +20,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -73,9 +74,15 @@ class EmulatorProcess:
 
         return emulator_url(self.protocol, self.pty) if self.network else str(self.link)
 
-    def state(self) -> dict | None:
-        """The emulated camera's state (``--state-file``)."""
-        return read_state(self.state_file)
+    def state(self, settle_s: float = 0.0) -> dict | None:
+        """The emulated camera's state (``--state-file``); with ``settle_s``, the first that is not moving
+        within that many seconds (the file is the child's view, written apart from its replies)."""
+        deadline = time.monotonic() + settle_s
+        state = read_state(self.state_file)
+        while (state is None or state.get("moving")) and time.monotonic() < deadline:
+            time.sleep(0.01)
+            state = read_state(self.state_file)
+        return state
 
     def kill(self) -> None:
         """Stop the emulator: its pty and link vanish."""

@@ -408,10 +408,11 @@ class _Emulator:
         if self.state_file is None:
             return
         now = time.monotonic()
-        if not force and now < self._state_due:
-            return
         state = self.state()
-        if state == self._last_state and not force:
+        # the moment motion ends is written at once: a client that saw the camera arrive (a position reply)
+        # and then reads the file must find it there, not a position 50 ms old
+        settled = not state["moving"] and bool(self._last_state and self._last_state["moving"])
+        if not force and (state == self._last_state or (now < self._state_due and not settled)):
             return
         tmp = self.state_file.with_name(f".{self.state_file.name}.{os.getpid()}.tmp")
         tmp.write_text(json.dumps(state))
@@ -453,7 +454,7 @@ class PtyEmulator(_Emulator):
     ``link`` (optional) is a symlink kept pointing at the pty, so that a client
     can reopen one path after the emulator was restarted (a new pty). The
     ``state_file`` (optional) is rewritten atomically (temporary file and
-    rename) at most every 50 ms while something changes. Use :meth:`serve`
+    rename) at most every 50 ms while something changes, and at once when a motion ends. Use :meth:`serve`
     in the calling thread, or :meth:`start` / :meth:`close` (a context manager)
     for a background thread.
     """

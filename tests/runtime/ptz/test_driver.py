@@ -51,6 +51,23 @@ def test_round_trip_reaches_every_target(protocol):
         assert emu.state()["errors"] == 0
 
 
+def test_the_state_file_holds_the_arrival_a_position_reply_reports(tmp_path):
+    """A client that saw the camera arrive and then reads the state file finds it there, settled: the
+    moment motion ends is written at once, not up to 50 ms later (the demo's ``emulator`` object once held
+    a pan still 0.97 deg short of home on a loaded CI machine)."""
+    import json
+
+    profile = quick_profile("visca")
+    state = tmp_path / "state.json"
+    with PtyEmulator(profile, state_file=state) as emu, PtzDriver(emu.path, profile) as ptz:
+        for pan, tilt, zoom in TARGETS[:3]:
+            t = ptz.set_target(*_rad(pan, tilt, zoom))
+            assert wait_for(lambda t=t: ptz.query_position().units == (t.pan, t.tilt, t.zoom), timeout=20)
+            s = json.loads(state.read_text())  # at once, no wait
+            assert (s["units"]["pan"], s["units"]["tilt"], s["units"]["zoom"]) == (t.pan, t.tilt, t.zoom)
+            assert s["moving"] is False
+
+
 def test_latest_target_wins_and_nothing_queues():
     profile = quick_profile("visca")
     with PtyEmulator(profile) as emu, PtzDriver(emu.path, profile) as ptz:
