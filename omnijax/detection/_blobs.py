@@ -374,8 +374,8 @@ def _taller(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T R"],
         in_lines = ((rows[None] - e[:, 0, None]) % T <= (e[:, 1] - e[:, 0])[:, None])  # (K, rows)
         in_radii = (r_idx[None] >= e[:, 2, None]) & (r_idx[None] < e[:, 3, None])  # (K, R)
         hidden = jnp.any(other[:, None, None] & in_lines[:, :, None] & in_radii[:, None, :], 0)
-        mean = ok[rows]
-        q = _windows(jnp.where(hidden, dps * mean, d2[rows]) - level * mean, polar.window_lines, reach, 1)[0]
+        usable = ok[rows]  # 1 where a sample lies on the floor's image: the background's mean counts there
+        q = _windows(jnp.where(hidden, dps * usable, d2[rows]) - level * usable, polar.window_lines, reach, 1)[0]
         q = jnp.convolve(q, jnp.ones(3) / 3, mode="same")  # over three samples: a weak change is noisy
         edge = people.i[k] - TALL_EDGE
         gap = jnp.max(jnp.where((r_idx < edge) & (q <= 0.0), r_idx, -1))  # the run ends after it
