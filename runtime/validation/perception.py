@@ -46,10 +46,16 @@ misses
   ``far_field``        the foot beyond :data:`FAR_M`
   ``other``
 
-Two figures of the background's life: ``ghost_gone_s``, the longest a ghost was seen after its person
-had walked :data:`LEFT_M` away (from the first processed frame on, for a person who left during the
-learning: per ghost false alarm, the seconds since the last frame anyone stood within LEFT_M of it,
-plus one frame); and ``standing``, how many frames a visible person had stood still for
+Two figures of the background's life: ``ghost_gone_s``, the longest a ghost lasted after its person had
+walked :data:`LEFT_M` away (from the first processed frame on, for a person who left during the
+learning). A ghost is an episode: ghost false alarms (``ghost_learning``, ``ghost_pause``) within
+:data:`SITE_M` of each other and none more than :data:`GHOST_GAP_S` apart; it lasted until its last false
+alarm, whose age is the seconds since the last frame anyone stood within LEFT_M of it, plus one frame.
+An episode that began more than GHOST_GAP_S after everyone had left its place was not there when they
+left (the place was clear in between): it is a false alarm at an old place, not a ghost that lasted, and
+is counted apart (``ghost_returns``, episodes; ``ghost_age_max_s``, the largest age of any ghost false
+alarm, which was ``ghost_gone_s`` before 2026-11-28: a one-frame false alarm beside a walker at a place
+left 6.5 s before counted as a ghost of 6.5 s); and ``standing``, how many frames a visible person had stood still for
 :data:`PAUSE_S` or more and in how many of them they were detected (``standing_detected_rate``), and the
 same without the frames of people standing on their spot since before the learning's first frame
 (``standing_detected_rate_seen``: no change detector sees them until they move; standing_start's people).
@@ -77,6 +83,8 @@ GATE_M = 0.5
 FRAGMENT_M, SITE_M, PAUSE_S, SECTOR_MARGIN_RAD, FAR_M = 0.7, 0.6, 1.0, 0.05, 2.7
 #: A ghost's clock starts when its person is LEFT_M (m) away.
 LEFT_M = 1.0
+#: A ghost's false alarms are one episode while none is more than GHOST_GAP_S (s) after the last.
+GHOST_GAP_S = 0.5
 #: A person counts as standing at a place in the learning frames when there in this share of them.
 LEARNING_SHARE = 0.2
 #: A false alarm this near (m) to a coloured shadow's axis on the floor lies in it (a body's half width
@@ -248,7 +256,8 @@ class PerceptionScore:
     detections: int = 0
     false_alarms: int = 0
     frames: int = 0
-    ghost_gone_s: float = 0.0
+    #: ghost episodes: [age at the first false alarm (s), age at the last (s), last frame, place (2,)]
+    ghosts: list = field(default_factory=list)
     standing_frames: int = 0
     standing_detected: int = 0
     #: the same without the frames of people the learning never saw off their spot (``never_seen_free``)
@@ -318,7 +327,7 @@ class PerceptionScore:
             cause = self._fa_cause(frame, z[k], z, person_of, foot, history)
             self.fa_causes[cause] += 1
             if cause in ("ghost_learning", "ghost_pause"):
-                self.ghost_gone_s = max(self.ghost_gone_s, history.ghost_age(frame, z[k]))
+                self._ghost_seen(frame, z[k], history.ghost_age(frame, z[k]), history.fps)
             out["false"].append({"xy": [round(float(v), 3) for v in z[k]], "cause": cause})
         return out
 
@@ -358,6 +367,22 @@ class PerceptionScore:
             return "absorbed_standing"
         return "far_field" if np.hypot(*q["foot_m"]) > FAR_M else "other"
 
+    def _ghost_seen(self, frame: int, xy, age: float, fps: float) -> None:
+        """A ghost false alarm at ``xy``: it continues the episode at that place, or begins one."""
+        for ep in self.ghosts:
+            if frame - ep[2] <= GHOST_GAP_S * fps and np.linalg.norm(ep[3] - xy) <= SITE_M:
+                ep[1:] = [age, frame, np.asarray(xy, float)]
+                return
+        self.ghosts.append([age, age, frame, np.asarray(xy, float)])
+
+    def ghost_figures(self) -> dict:
+        """``ghost_gone_s`` (the longest a ghost lasted after its person left), ``ghost_returns`` (episodes
+        that began at a place left more than GHOST_GAP_S before) and ``ghost_age_max_s`` (module docstring)."""
+        lasted = [ep[1] for ep in self.ghosts if ep[0] <= GHOST_GAP_S]
+        return {"ghost_gone_s": max(lasted, default=0.0),
+                "ghost_returns": sum(ep[0] > GHOST_GAP_S for ep in self.ghosts),
+                "ghost_age_max_s": max((ep[1] for ep in self.ghosts), default=0.0)}
+
     def nees_figures(self) -> dict:
         """NEES mean and P(> 6.63) of r_f and theta_f, overall and per range band."""
         a = np.array(self.nees, float).reshape(-1, 3)
@@ -381,7 +406,7 @@ class PerceptionScore:
                 "miss_rate_seen": self._miss_rate_seen(),
                 "fa_causes": {c: self.fa_causes[c] for c in FA_CAUSES},
                 "miss_causes": {c: self.miss_causes[c] for c in MISS_CAUSES},
-                "ghost_gone_s": self.ghost_gone_s, "standing_frames": self.standing_frames,
+                **self.ghost_figures(), "standing_frames": self.standing_frames,
                 "standing_detected_rate": (self.standing_detected / self.standing_frames
                                            if self.standing_frames else None),
                 "standing_seen_frames": self.standing_seen_frames,

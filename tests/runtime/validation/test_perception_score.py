@@ -65,6 +65,31 @@ def test_a_ghost_ages_from_when_its_person_left_and_a_standing_person_counts():
     assert s["standing_frames"] == 6 and s["standing_detected_rate"] == pytest.approx(5 / 6)
 
 
+def test_a_ghost_is_an_episode_and_a_false_alarm_at_a_place_left_long_ago_is_not_one_that_lasted():
+    """Person 0 stands at (2, 0) through the learning (frames 0-2), then walks 1.5 m off at frame 4 and
+    stays there; a detection stays at (2, 0) in frames 4-6 (a ghost of the learning that lasted 0.3 s at
+    10 fps), is gone in frames 7-39, and shows for one frame at frame 40 (3.7 s after the person left: a
+    false alarm at an old place, the standing_start 9188 case). ``ghost_gone_s`` is the 0.3 s the ghost
+    lasted, the frame-40 one an episode apart (``ghost_returns``), and ``ghost_age_max_s`` the old figure."""
+    T = 41
+    feet = np.zeros((T, 1, 2))
+    feet[:, 0] = [2.0, 0.0]
+    feet[4:, 0] = [2.0, 1.5]
+    moving = np.zeros((T, 1), bool)
+    moving[3:5, 0] = True
+    hist = _history(feet, moving)
+    score = PerceptionScore()
+    for f in range(3, T):
+        z = np.array([feet[f, 0]] + ([[2.0, 0.0]] if 4 <= f <= 6 or f == 40 else []))
+        out = score.add_frame(f, _truth(f, feet[f]), _people(len(z)), z, np.ones((len(z), 2)), hist)
+        if f in (4, 40):
+            assert [x["cause"] for x in out["false"]] == ["ghost_learning"]
+    s = score.summary()
+    assert s["false_alarms"] == 4 and s["fa_causes"]["ghost_learning"] == 4  # still false alarms, all of them
+    assert s["ghost_gone_s"] == pytest.approx(0.3)
+    assert s["ghost_returns"] == 1 and s["ghost_age_max_s"] == pytest.approx(3.7)
+
+
 def test_someone_standing_since_before_the_learning_is_never_seen_free():
     """The learning takes frames 1-3. Person 0 stands at (2, 0) from frame 0 to frame 6 and walks from
     frame 7; person 1 walks in frames 0-1 and stands from frame 2 on. Nobody is detected in frames 4-9:
