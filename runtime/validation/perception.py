@@ -379,9 +379,9 @@ class PerceptionScore:
         """``ghost_gone_s`` (the longest a ghost lasted after its person left), ``ghost_returns`` (episodes
         that began at a place left more than GHOST_GAP_S before) and ``ghost_age_max_s`` (module docstring)."""
         lasted = [ep[1] for ep in self.ghosts if ep[0] <= GHOST_GAP_S]
-        return {"ghost_gone_s": max(lasted, default=0.0),
-                "ghost_returns": sum(ep[0] > GHOST_GAP_S for ep in self.ghosts),
-                "ghost_age_max_s": max((ep[1] for ep in self.ghosts), default=0.0)}
+        return {"ghost_gone_s": float(max(lasted, default=0.0)),
+                "ghost_returns": int(sum(ep[0] > GHOST_GAP_S for ep in self.ghosts)),
+                "ghost_age_max_s": float(max((ep[1] for ep in self.ghosts), default=0.0))}
 
     def nees_figures(self) -> dict:
         """NEES mean and P(> 6.63) of r_f and theta_f, overall and per range band."""

@@ -3,6 +3,8 @@ false alarm with their causes, a ghost's age after its person left, a standing p
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -88,6 +90,7 @@ def test_a_ghost_is_an_episode_and_a_false_alarm_at_a_place_left_long_ago_is_not
     assert s["false_alarms"] == 4 and s["fa_causes"]["ghost_learning"] == 4  # still false alarms, all of them
     assert s["ghost_gone_s"] == pytest.approx(0.3)
     assert s["ghost_returns"] == 1 and s["ghost_age_max_s"] == pytest.approx(3.7)
+    json.dumps(s)  # what perception_sweep.py --json writes: plain numbers, no NumPy scalars
 
 
 def test_someone_standing_since_before_the_learning_is_never_seen_free():
