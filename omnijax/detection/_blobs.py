@@ -30,8 +30,11 @@ or one behind the other as the camera sees them, and the paper's estimate then f
      step finds the same person again and the next person is sought in what is left;
    - once all are found, a person whose change on their centre line runs on inward of eq 12's foot
      (every other person's samples set aside) is taller than the prior's extent: eq 12 kept their head
-     and put the foot outward, so it moves to where that change starts (:func:`_taller`, within
-     :data:`TALL_SIGMAS` of the prior's height; docs/detection.md, "Taller than the prior").
+     and put the foot outward, so it moves to where that change starts (:func:`_off_prior_height`, within
+     :data:`TALL_SIGMAS` of the prior's height; docs/detection.md, "Taller than the prior"); and one whose
+     change starts sharply outward of eq 12's foot is shorter than the prior: eq 12 kept their head and
+     put the foot inward (the inner hypotheses' extents are longer), so it moves out to where that change
+     starts (:data:`SHORT_RUN`; docs/detection.md, "Shorter than the prior").
 3. Two people's feet are at least a shoulder width apart; two detections whose feet are closer
    than :data:`MERGE_M` on the floor are one person's fragments and the weaker goes, and a run of
    fewer than :data:`MIN_RUN_LINES` lines (or one found by the head alone narrower than
@@ -81,7 +84,7 @@ VALLEY = 0.6
 #: Explained: the model's width plus MARGIN_LINES each side; radii from MARGIN_R before the foot
 #: to MARGIN_R past the top of a person TALL_SIGMAS prior standard deviations taller.
 MARGIN_LINES, MARGIN_R, TALL_SIGMAS = 1, 3, 3.0
-#: Someone taller than the prior (:func:`_taller`): eq 12 with the prior's extent keeps their head and puts
+#: Someone taller than the prior (:func:`_off_prior_height`): eq 12 with the prior's extent keeps their head and puts
 #: the foot where a person of the prior's height with that head's top would stand, outward of the true
 #: one, while the samples inward of it still hold their legs' change (weak, for someone dressed like the
 #: floor: three_people and six_people 9182, a person 2.5 standard deviations tall placed 0.5-0.6 m out).
@@ -96,6 +99,23 @@ MARGIN_LINES, MARGIN_R, TALL_SIGMAS = 1, 3, 3.0
 TALL_CHARGE = 0.25
 TALL_EDGE = 2
 TALL_MIN = 6
+#: Someone shorter than the prior (:func:`_off_prior_height`, the mirror): every foot hypothesis whose
+#: extent holds their image scores alike but for the empty samples it takes in, and the inner ones win
+#: (their extents are longer in this mirror), so eq 12 puts the foot where a person of the prior's height
+#: with that head's top would stand, inward of the true one (seed 9201's person 0, 1.614 m, 2.7 prior
+#: standard deviations short: 0.35-0.55 m inward at 3.2-4.1 m, with strong legs). The foot moves out to
+#: where the change starts: the first sample past eq 12's foot from which SHORT_RUN samples count as the
+#: person's (as for the taller, the mean of three over ``dps + TALL_CHARGE c_min``), at least SHORT_MIN
+#: samples out, no farther than a person TALL_SIGMAS shorter with the same head's top stands, not under
+#: the camera, and only where the change starts sharply: the largest change a sample over its first
+#: SHORT_RUN + 1 samples (the edge is soft over a sample or two) at least SHORT_SHARP of the median over
+#: the body from there to the neck (skin and hair change more, and vary more, than clothes). A change
+#: that starts weak and ramps up is a person whose legs the background has half learnt, or who is
+#: dressed like the floor (six_people 9132: people of 1.80 and 1.82 m whose lower legs showed nothing,
+#: thrown 0.5-0.8 m outward without this test): the head and the prior decide there, as before.
+SHORT_RUN = 3
+SHORT_MIN = 2
+SHORT_SHARP = 0.5
 #: Feet closer than this on the floor (m) are one person's (two people's are a shoulder width apart).
 MERGE_M = 0.45
 #: Fewest lines in a person's run: a body spans at least 5 lines (2 asin(rho / R) at the room's far
@@ -349,16 +369,18 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     people = jax.tree.map(lambda v: jnp.zeros((max_people, *v.shape), v.dtype).at[0].set(v), rec)
     state = (jnp.asarray(1), d2, explained, fig, people, rec["valid"])
     people = jax.lax.while_loop(lambda s: (s[0] < max_people) & s[5], body, state)[4]
-    return _taller(polar, d2_frame, ok, People(**people), dps, dps + TALL_CHARGE * c_min, sigma_H_p)
+    return _off_prior_height(polar, d2_frame, ok, People(**people), dps, dps + TALL_CHARGE * c_min, sigma_H_p)
 
 
-def _taller(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T R"], people: People, dps, level,
-            sigma_H_p) -> People:
-    """Each person's foot moved inward from eq 12's to where their change starts on their centre line, for
-    someone taller than the prior (:data:`TALL_CHARGE` and after), with every other person's explained
-    samples at the background's mean ``dps`` (someone nearer on the same azimuth is not this person's
-    legs); ``level`` the change a sample that counts as the person's. Their explained region (what the
-    background's life repairs if they are a ghost) grows inward with the foot. Beyond the paper."""
+def _off_prior_height(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T R"], people: People, dps,
+                      level, sigma_H_p) -> People:
+    """Each person's foot moved to where their change starts on their centre line, for someone taller or
+    shorter than the prior, with every other person's explained samples at the background's mean ``dps``
+    (someone nearer on the same azimuth is not this person's legs); ``level`` the change a sample that
+    counts as the person's. Taller (:data:`TALL_CHARGE` and after): inward, where an unbroken run of the
+    person's change inward of eq 12's foot starts. Shorter (:data:`SHORT_RUN` and after): outward, where
+    the change starts past eq 12's foot, if it starts sharply. Their explained region (what the
+    background's life repairs if they are a ghost) grows inward with an inward move. Beyond the paper."""
     T, R = d2.shape
     reach = _wrap(T, polar.window_reach)
     out, r_idx = polar.hyp_out, jnp.arange(R)
@@ -366,6 +388,8 @@ def _taller(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T R"],
     e = people.explained
     grown = (out[people.i][:, None] - out[None]) <= TALL_SIGMAS * sigma_H_p * polar.hyp_dout_dH[None]
     lowest = jnp.argmax(grown & polar.hyp_ok[None] & (r_idx[None] >= polar.hyp_first), 1)  # tallest allowed
+    shrunk = (out[None] - out[people.i][:, None]) <= TALL_SIGMAS * sigma_H_p * polar.hyp_dout_dH[None]
+    highest = jnp.max(jnp.where(shrunk & polar.hyp_ok[None] & (r_idx[None] >= people.i[:, None]), r_idx[None], -1), 1)
 
     def one(k):
         t = jnp.floor(people.centre[k]).astype(jnp.int32)
@@ -375,13 +399,24 @@ def _taller(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T R"],
         in_radii = (r_idx[None] >= e[:, 2, None]) & (r_idx[None] < e[:, 3, None])  # (K, R)
         hidden = jnp.any(other[:, None, None] & in_lines[:, :, None] & in_radii[:, None, :], 0)
         usable = ok[rows]  # 1 where a sample lies on the floor's image: the background's mean counts there
-        q = _windows(jnp.where(hidden, dps * usable, d2[rows]) - level * usable, polar.window_lines, reach, 1)[0]
+        seen = _windows(jnp.where(hidden, dps * usable, d2[rows]) - dps * usable, polar.window_lines, reach, 1)[0]
+        n = _windows(usable, polar.window_lines, reach, 1)[0]
+        q = seen - (level - dps) * n
+        per_sample = seen / jnp.maximum(n, 1.0)  # the change a sample over the background's mean
         q = jnp.convolve(q, jnp.ones(3) / 3, mode="same")  # over three samples: a weak change is noisy
         edge = people.i[k] - TALL_EDGE
         gap = jnp.max(jnp.where((r_idx < edge) & (q <= 0.0), r_idx, -1))  # the run ends after it
         j = gap + 1
         move = people.valid[k] & (j <= people.i[k] - TALL_MIN) & (j >= lowest[k]) & (gap >= 0)
-        return jnp.where(move, j, people.i[k])
+        # shorter: the change starts past eq 12's foot and holds SHORT_RUN samples from there
+        held = jnp.convolve((q > 0.0).astype(q.dtype), jnp.ones(SHORT_RUN), mode="full")[SHORT_RUN - 1:] >= SHORT_RUN
+        start = jnp.min(jnp.where(held & (r_idx >= people.i[k]), r_idx, R))
+        first = jnp.max(per_sample[jnp.minimum(start + jnp.arange(SHORT_RUN + 1), R - 1)])
+        body = (r_idx >= start) & (r_idx < polar.hyp_head[people.i[k]])  # up to the neck: heads are stronger
+        sharp = first >= SHORT_SHARP * jnp.nanmedian(jnp.where(body, per_sample, jnp.nan))
+        short = people.valid[k] & ~move & (people.i[k] > polar.hyp_first) & (start >= people.i[k] + SHORT_MIN) \
+            & (start <= highest[k]) & sharp  # not under the camera: that foot is anywhere in the blind disc
+        return jnp.where(move, j, jnp.where(short, start, people.i[k]))
 
     i = jax.vmap(one)(jnp.arange(K))
     explained = e.at[:, 2].set(jnp.minimum(e[:, 2], jnp.maximum(i - MARGIN_R, 0)))

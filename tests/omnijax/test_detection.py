@@ -403,6 +403,50 @@ def test_a_person_taller_than_the_prior_gets_the_foot_where_their_legs_start(pap
     assert foot(8.0 * c_min, 0.0) == pytest.approx(truth, abs=1.5)
 
 
+def test_a_person_shorter_than_the_prior_gets_the_foot_where_their_change_starts(paper_detector):
+    """On a table of d^2: someone 2.7 prior standard deviations short (seed 9201's person 0, 1.614 m
+    against 1.75 +- 0.05) 3.5 m out, legs and body changing d^2 strongly. Every foot hypothesis whose
+    extent holds their image scores alike but for the empty samples it takes in, and the inner ones,
+    whose extents are longer in this mirror, win: eq 12 puts the foot where a person of the prior's
+    height with that head's top would stand, 0.35 m inward (the demo's PTZ aimed off them for 50-frame
+    runs). The empty samples inward of where the change starts move it out to there; a person of the
+    prior's height stays where eq 12 puts them, and so does someone whose change starts farther out
+    than any person TALL_SIGMAS short could stand (legs that do not show: the head and the prior
+    decide), or starts weak and ramps up (legs the background has half learnt: six_people 9132's
+    people of 1.80 m were thrown 0.5-0.8 m outward by a rule without that test)."""
+    from omnijax.detection._blobs import TALL_SIGMAS
+    from omnijax.detection._detector import find_sectors, locate_people
+
+    det = paper_detector
+    polar = det.polar
+    ok = np.asarray(polar.line_ok, np.float32)
+    step = 2 * np.pi / polar.n_theta
+    i = int(np.argmin(np.abs(np.asarray(polar.hyp_R) - 3.5)))
+    out, r_f = np.asarray(polar.hyp_out), np.asarray(polar.hyp_r_f)
+    half = int(np.round(0.5 * float(polar.hyp_width[i]) / step))
+    c_min = float(det.thresholds.c_min)
+
+    def foot(body, sigmas, start=i, ramp=0):
+        top = int(round(out[i] - sigmas * float(det.sigma_H_p) * float(polar.hyp_dout_dH[i])))
+        d2 = 2.0 * ok
+        d2[100 - half:100 + half + 1, start:top] += body
+        d2[100 - half:100 + half + 1, start:start + ramp] -= np.linspace(body - 0.5 * c_min, 0.0, ramp)
+        d2 = jnp.asarray(d2 * ok)
+        d = locate_people(det, d2, find_sectors(det, d2.sum(-1)))
+        ks = list(np.flatnonzero(np.asarray(d.valid)))
+        assert len(ks) == 1
+        return float(d.r_f[ks[0]])
+
+    assert 2.7 < TALL_SIGMAS
+    truth = float(r_f[i])
+    body = 8.0 * c_min
+    assert foot(body, 0.0) == pytest.approx(truth, abs=1.5)  # the prior's height: eq 12's foot
+    assert foot(body, 2.7) == pytest.approx(truth, abs=1.5)  # short: where the change starts
+    legs_hidden = int(polar.hyp_head[i]) - 6  # the change starts at the waist: no person that short
+    assert foot(body, 2.7, legs_hidden) < truth - 3.0  # the foot stays eq 12's, from the head's top
+    assert foot(body, 2.7, ramp=10) < truth - 3.0  # 0.5 c_min rising to the body's 8 c_min over 10 samples
+
+
 def test_two_people_whose_images_overlap_in_azimuth_are_parted_not_merged(paper_detector):
     """stops_a_minute 9078's two standers on a table of d^2: one 1.25 m out, the other 1.81 m out and 8
     degrees aside, their images overlapping over most of their lines, found as the people stage found
