@@ -31,10 +31,11 @@ or one behind the other as the camera sees them, and the paper's estimate then f
    - once all are found, a person whose change on their centre line runs on inward of eq 12's foot
      (every other person's samples set aside) is taller than the prior's extent: eq 12 kept their head
      and put the foot outward, so it moves to where that change starts (:func:`_off_prior_height`, within
-     :data:`TALL_SIGMAS` of the prior's height; docs/detection.md, "Taller than the prior"); and one whose
-     change starts sharply outward of eq 12's foot is shorter than the prior: eq 12 kept their head and
-     put the foot inward (the inner hypotheses' extents are longer), so it moves out to where that change
-     starts (:data:`SHORT_RUN`; docs/detection.md, "Shorter than the prior").
+     :data:`TALL_SIGMAS` of the prior's height; docs/detection.md, "Taller than the prior"); one whose
+     change starts outward of eq 12's foot (nothing inward of it shows) has the foot from the head's top
+     and the prior's height, eq 12's extent filled by empty samples (``from_head``: a person shorter
+     than the prior, legs that do not show, or legs behind furniture; the sigma carries the height's
+     spread, :data:`EMPTY_INNER`; docs/detection.md, "Shorter than the prior").
 3. Two people's feet are at least a shoulder width apart; two detections whose feet are closer
    than :data:`MERGE_M` on the floor are one person's fragments and the weaker goes, and a run of
    fewer than :data:`MIN_RUN_LINES` lines (or one found by the head alone narrower than
@@ -99,23 +100,19 @@ MARGIN_LINES, MARGIN_R, TALL_SIGMAS = 1, 3, 3.0
 TALL_CHARGE = 0.25
 TALL_EDGE = 2
 TALL_MIN = 6
-#: Someone shorter than the prior (:func:`_off_prior_height`, the mirror): every foot hypothesis whose
-#: extent holds their image scores alike but for the empty samples it takes in, and the inner ones win
-#: (their extents are longer in this mirror), so eq 12 puts the foot where a person of the prior's height
-#: with that head's top would stand, inward of the true one (seed 9201's person 0, 1.614 m, 2.7 prior
-#: standard deviations short: 0.35-0.55 m inward at 3.2-4.1 m, with strong legs). The foot moves out to
-#: where the change starts: the first sample past eq 12's foot from which SHORT_RUN samples count as the
-#: person's (as for the taller, the mean of three over ``dps + TALL_CHARGE c_min``), at least SHORT_MIN
-#: samples out, no farther than a person TALL_SIGMAS shorter with the same head's top stands, not under
-#: the camera, and only where the change starts sharply: the largest change a sample over its first
-#: SHORT_RUN + 1 samples (the edge is soft over a sample or two) at least SHORT_SHARP of the median over
-#: the body from there to the neck (skin and hair change more, and vary more, than clothes). A change
-#: that starts weak and ramps up is a person whose legs the background has half learnt, or who is
-#: dressed like the floor (six_people 9132: people of 1.80 and 1.82 m whose lower legs showed nothing,
-#: thrown 0.5-0.8 m outward without this test): the head and the prior decide there, as before.
-SHORT_RUN = 3
-SHORT_MIN = 2
-SHORT_SHARP = 0.5
+#: A foot from the head (:func:`_off_prior_height`): eq 12's extent holds the person's image and empty samples
+#: inward of it, EMPTY_INNER or more before the change starts (counted as for the taller: the first sample
+#: from which three count as the person's). Every hypothesis whose extent holds the image scores alike but
+#: for the empty samples it takes in, and the inner ones win (their extents are longer in this mirror), so
+#: the foot is where a person of the prior's height with that head's top would stand. Moving it out to
+#: where the change starts is right for a person shorter than the prior (seed 9201's person 0, 1.614 m:
+#: 0.35-0.55 m inward at 3.2-4.1 m) and wrong for legs behind furniture (six_people 9211: a 1.80-m walker
+#: whose lower legs a table hid, thrown 0.5-0.6 m outward): the change's start is sharp in both, the
+#: background's own edges do not part them, and the prior's odds of a 2.7-sigma person are 1 in 40 of
+#: one at the mean; so the foot stays, and its sigma carries the prior height's spread (docs/detection.md, "Shorter
+#: than the prior", the move tried and not kept). Two samples: the body's round base over the window's
+#: lines (the same edge as TALL_EDGE).
+EMPTY_INNER = 3
 #: Feet closer than this on the floor (m) are one person's (two people's are a shoulder width apart).
 MERGE_M = 0.45
 #: Fewest lines in a person's run: a body spans at least 5 lines (2 asin(rho / R) at the room's far
@@ -146,7 +143,9 @@ class People(eqx.Module):
     ``visible``: share of the person's window samples that no earlier person explained;
     ``explained``: the samples this person explained, as (first line, last line, first radius,
     end radius), the region the background's life repairs when it is a ghost; ``head_only``: found
-    by their neck and head alone (the whole person's contrast under the gate: dressed like the floor).
+    by their neck and head alone (the whole person's contrast under the gate: dressed like the floor);
+    ``from_head``: the foot from the head's top and the prior's height, nothing changed over the inner
+    end of eq 12's extent (:data:`EMPTY_INNER`).
     """
 
     valid: Bool[Array, " K"]
@@ -160,6 +159,7 @@ class People(eqx.Module):
     visible: Float[Array, " K"]
     explained: Int[Array, "K 4"]
     head_only: Bool[Array, " K"]
+    from_head: Bool[Array, " K"]
 
 
 def prefix_sums(x: Float[Array, "n ..."]) -> Float[Array, "n_plus_1 ..."]:
@@ -340,7 +340,8 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
         visible = vis_line[t0] / n_line[t0]
         rec = dict(valid=found, i=i, centre=centre, first=first, last=last, contrast=contrast[t0],
                    excess=excess[t0], support=support[t0], visible=visible,
-                   explained=jnp.stack([e_first, e_last, r0, r1]), head_only=found & ~whole[t0])
+                   explained=jnp.stack([e_first, e_last, r0, r1]), head_only=found & ~whole[t0],
+                   from_head=jnp.zeros_like(found))
         return d2, explained | on, rec
 
     # one person a pass, until a pass finds nobody: the passes after it would find nobody either (nothing
@@ -374,13 +375,14 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
 
 def _off_prior_height(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T R"], people: People, dps,
                       level, sigma_H_p) -> People:
-    """Each person's foot moved to where their change starts on their centre line, for someone taller or
-    shorter than the prior, with every other person's explained samples at the background's mean ``dps``
-    (someone nearer on the same azimuth is not this person's legs); ``level`` the change a sample that
-    counts as the person's. Taller (:data:`TALL_CHARGE` and after): inward, where an unbroken run of the
-    person's change inward of eq 12's foot starts. Shorter (:data:`SHORT_RUN` and after): outward, where
-    the change starts past eq 12's foot, if it starts sharply. Their explained region (what the
-    background's life repairs if they are a ghost) grows inward with an inward move. Beyond the paper."""
+    """Each person's foot moved inward from eq 12's to where their change starts on their centre line, for
+    someone taller than the prior (:data:`TALL_CHARGE` and after), with every other person's explained
+    samples at the background's mean ``dps`` (someone nearer on the same azimuth is not this person's
+    legs); ``level`` the change a sample that counts as the person's. Their explained region (what the
+    background's life repairs if they are a ghost) grows inward with the foot. A person whose change
+    starts :data:`EMPTY_INNER` or more samples outward of eq 12's foot is marked ``from_head``: their foot
+    is the head's top and the prior's height (shorter than the prior, or legs that do not show). Beyond
+    the paper."""
     T, R = d2.shape
     reach = _wrap(T, polar.window_reach)
     out, r_idx = polar.hyp_out, jnp.arange(R)
@@ -388,8 +390,6 @@ def _off_prior_height(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Arra
     e = people.explained
     grown = (out[people.i][:, None] - out[None]) <= TALL_SIGMAS * sigma_H_p * polar.hyp_dout_dH[None]
     lowest = jnp.argmax(grown & polar.hyp_ok[None] & (r_idx[None] >= polar.hyp_first), 1)  # tallest allowed
-    shrunk = (out[None] - out[people.i][:, None]) <= TALL_SIGMAS * sigma_H_p * polar.hyp_dout_dH[None]
-    highest = jnp.max(jnp.where(shrunk & polar.hyp_ok[None] & (r_idx[None] >= people.i[:, None]), r_idx[None], -1), 1)
 
     def one(k):
         t = jnp.floor(people.centre[k]).astype(jnp.int32)
@@ -399,28 +399,21 @@ def _off_prior_height(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Arra
         in_radii = (r_idx[None] >= e[:, 2, None]) & (r_idx[None] < e[:, 3, None])  # (K, R)
         hidden = jnp.any(other[:, None, None] & in_lines[:, :, None] & in_radii[:, None, :], 0)
         usable = ok[rows]  # 1 where a sample lies on the floor's image: the background's mean counts there
-        seen = _windows(jnp.where(hidden, dps * usable, d2[rows]) - dps * usable, polar.window_lines, reach, 1)[0]
-        n = _windows(usable, polar.window_lines, reach, 1)[0]
-        q = seen - (level - dps) * n
-        per_sample = seen / jnp.maximum(n, 1.0)  # the change a sample over the background's mean
+        q = _windows(jnp.where(hidden, dps * usable, d2[rows]) - level * usable, polar.window_lines, reach, 1)[0]
         q = jnp.convolve(q, jnp.ones(3) / 3, mode="same")  # over three samples: a weak change is noisy
         edge = people.i[k] - TALL_EDGE
         gap = jnp.max(jnp.where((r_idx < edge) & (q <= 0.0), r_idx, -1))  # the run ends after it
         j = gap + 1
         move = people.valid[k] & (j <= people.i[k] - TALL_MIN) & (j >= lowest[k]) & (gap >= 0)
-        # shorter: the change starts past eq 12's foot and holds SHORT_RUN samples from there
-        held = jnp.convolve((q > 0.0).astype(q.dtype), jnp.ones(SHORT_RUN), mode="full")[SHORT_RUN - 1:] >= SHORT_RUN
-        start = jnp.min(jnp.where(held & (r_idx >= people.i[k]), r_idx, R))
-        first = jnp.max(per_sample[jnp.minimum(start + jnp.arange(SHORT_RUN + 1), R - 1)])
-        body = (r_idx >= start) & (r_idx < polar.hyp_head[people.i[k]])  # up to the neck: heads are stronger
-        sharp = first >= SHORT_SHARP * jnp.nanmedian(jnp.where(body, per_sample, jnp.nan))
-        short = people.valid[k] & ~move & (people.i[k] > polar.hyp_first) & (start >= people.i[k] + SHORT_MIN) \
-            & (start <= highest[k]) & sharp  # not under the camera: that foot is anywhere in the blind disc
-        return jnp.where(move, j, jnp.where(short, start, people.i[k]))
+        start = jnp.min(jnp.where((r_idx >= people.i[k]) & (q > 0.0), r_idx, R))  # where the change starts
+        # not under the camera (that foot is anywhere in the blind disc, a bound of its own)
+        empty = people.valid[k] & ~move & (people.i[k] > polar.hyp_first) & (start >= people.i[k] + EMPTY_INNER)
+        return jnp.where(move, j, people.i[k]), empty
 
-    i = jax.vmap(one)(jnp.arange(K))
+    i, from_head = jax.vmap(one)(jnp.arange(K))
     explained = e.at[:, 2].set(jnp.minimum(e[:, 2], jnp.maximum(i - MARGIN_R, 0)))
-    return eqx.tree_at(lambda p: (p.i, p.explained), people, (i.astype(people.i.dtype), explained.astype(e.dtype)))
+    return eqx.tree_at(lambda p: (p.i, p.explained, p.from_head), people,
+                       (i.astype(people.i.dtype), explained.astype(e.dtype), from_head))
 
 
 def _distances(xy: Float[Array, "K 2"]) -> Float[Array, "K K"]:

@@ -200,7 +200,7 @@ HEAD_SPAN = 4
 
 
 def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0,
-                 head_only=False) -> tuple[Array, Array, Array, Array]:
+                 from_head=False) -> tuple[Array, Array, Array, Array]:
     """``(sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f)`` of a detection whose foot hypothesis is ``i``.
 
     One upright person's image is symmetric about the foot's azimuth, so the run's centre is
@@ -227,10 +227,12 @@ def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0,
     extent^2 / 12``); at the first, under the camera, anywhere in the blind disc inside the first
     hypothesis's image radius ``r_1`` (uniform over the disc: ``bound_r_f^2 = r_1^2 / 6`` about
     ``r_1``, ``bound_theta_f`` = :data:`BLIND_THETA_SIGMA`); the rule adds it as it is. A person
-    found by their neck and head alone (``head_only``: dressed like the floor) has their foot from
-    the head's top and the prior's height: a height ``sigma_H_p`` off moves the top ``dout/dH`` px and
-    the foot with it, ``d r_f / d out`` px a px (0.05-0.19 m on the floor from 1 to 3.8 m out in the
-    paper's rig): a foot the detector did not see, so a bound part too.
+    found by their neck and head alone (dressed like the floor), or whose change starts outward of
+    eq 12's foot (``from_head``: shorter than the prior, legs that do not show or behind furniture),
+    has their foot from the head's top and the prior's height (``from_head`` here covers both): a
+    height ``sigma_H_p`` off moves the top ``dout/dH`` px and the foot with it, ``d r_f / d out`` px a
+    px (0.05-0.19 m on the floor from 1 to 3.8 m out in the paper's rig): a foot the detector did not
+    see, so a bound part too.
     """
     polar = detector.polar
     step = 2 * jnp.pi / polar.n_theta
@@ -251,7 +253,7 @@ def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0,
     a, b = jnp.clip(i - HEAD_SPAN, 0, n), jnp.clip(i + HEAD_SPAN, 0, n)  # slopes over a few hypotheses
     dr_f_dout = (polar.hyp_r_f[b] - polar.hyp_r_f[a]) / jnp.maximum(polar.hyp_out[b] - polar.hyp_out[a], 1)
     height = detector.sigma_H_p * polar.hyp_dout_dH[i] * dr_f_dout
-    bound_r = jnp.where(head_only, jnp.sqrt(bound_r**2 + height**2), bound_r)
+    bound_r = jnp.where(from_head, jnp.sqrt(bound_r**2 + height**2), bound_r)
     bound_theta = jnp.where(blind, BLIND_THETA_SIGMA, 0.0)
     return sigma_r, sigma_theta, bound_r, bound_theta
 
@@ -281,7 +283,7 @@ def detections_of(detector: Detector, people: People, d2: Float[Array, "T R"]) -
     i = jnp.where(jnp.any(two, 1), i_own, people.i)
     width = (people.last - people.first + 1) * step
     sigma_r, sigma_theta, bound_r, bound_theta = _foot_sigmas(detector, i, people.contrast, width, people.visible,
-                                                              people.head_only)
+                                                              people.head_only | people.from_head)
     first = polar.hyp_first
     xy = floor(i)
     person = a_person(polar, people, i)

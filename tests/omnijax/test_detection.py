@@ -403,18 +403,17 @@ def test_a_person_taller_than_the_prior_gets_the_foot_where_their_legs_start(pap
     assert foot(8.0 * c_min, 0.0) == pytest.approx(truth, abs=1.5)
 
 
-def test_a_person_shorter_than_the_prior_gets_the_foot_where_their_change_starts(paper_detector):
+def test_a_foot_placed_by_the_head_carries_the_height_prior_in_its_sigma(paper_detector):
     """On a table of d^2: someone 2.7 prior standard deviations short (seed 9201's person 0, 1.614 m
     against 1.75 +- 0.05) 3.5 m out, legs and body changing d^2 strongly. Every foot hypothesis whose
     extent holds their image scores alike but for the empty samples it takes in, and the inner ones,
     whose extents are longer in this mirror, win: eq 12 puts the foot where a person of the prior's
-    height with that head's top would stand, 0.35 m inward (the demo's PTZ aimed off them for 50-frame
-    runs). The empty samples inward of where the change starts move it out to there; a person of the
-    prior's height stays where eq 12 puts them, and so does someone whose change starts farther out
-    than any person TALL_SIGMAS short could stand (legs that do not show: the head and the prior
-    decide), or starts weak and ramps up (legs the background has half learnt: six_people 9132's
-    people of 1.80 m were thrown 0.5-0.8 m outward by a rule without that test)."""
-    from omnijax.detection._blobs import TALL_SIGMAS
+    height with that head's top would stand, inward of the truth. Where the change starts is not where
+    the foot is when furniture hides the legs (six_people 9211), so the foot stays; but it is the head's
+    top and the prior's height that placed it, and its sigma says so: the height's spread as a bound
+    part, as for a person found by the head alone. A person of the prior's height (the change starts at
+    eq 12's foot) has none."""
+    from omnijax.detection._blobs import EMPTY_INNER
     from omnijax.detection._detector import find_sectors, locate_people
 
     det = paper_detector
@@ -426,25 +425,30 @@ def test_a_person_shorter_than_the_prior_gets_the_foot_where_their_change_starts
     half = int(np.round(0.5 * float(polar.hyp_width[i]) / step))
     c_min = float(det.thresholds.c_min)
 
-    def foot(body, sigmas, start=i, ramp=0):
+    def found(sigmas, start=i):
         top = int(round(out[i] - sigmas * float(det.sigma_H_p) * float(polar.hyp_dout_dH[i])))
         d2 = 2.0 * ok
-        d2[100 - half:100 + half + 1, start:top] += body
-        d2[100 - half:100 + half + 1, start:start + ramp] -= np.linspace(body - 0.5 * c_min, 0.0, ramp)
+        d2[100 - half:100 + half + 1, start:top] += 8.0 * c_min
         d2 = jnp.asarray(d2 * ok)
         d = locate_people(det, d2, find_sectors(det, d2.sum(-1)))
         ks = list(np.flatnonzero(np.asarray(d.valid)))
         assert len(ks) == 1
-        return float(d.r_f[ks[0]])
+        return float(d.r_f[ks[0]]), float(d.bound_r_f[ks[0]])
 
-    assert 2.7 < TALL_SIGMAS
+    # the height's spread as it moves the foot: sigma_H_p dout/dH px of the top, d r_f / d out a px of it
+    # (the detector takes the slopes over a few hypotheses either side of the foot)
+    slope = lambda j: (r_f[j + 4] - r_f[j - 4]) / (out[j + 4] - out[j - 4])
+    height = lambda foot: (lambda j: float(det.sigma_H_p) * float(polar.hyp_dout_dH[j]) * slope(j))(
+        int(np.argmin(np.abs(r_f - foot))))
     truth = float(r_f[i])
-    body = 8.0 * c_min
-    assert foot(body, 0.0) == pytest.approx(truth, abs=1.5)  # the prior's height: eq 12's foot
-    assert foot(body, 2.7) == pytest.approx(truth, abs=1.5)  # short: where the change starts
-    legs_hidden = int(polar.hyp_head[i]) - 6  # the change starts at the waist: no person that short
-    assert foot(body, 2.7, legs_hidden) < truth - 3.0  # the foot stays eq 12's, from the head's top
-    assert foot(body, 2.7, ramp=10) < truth - 3.0  # 0.5 c_min rising to the body's 8 c_min over 10 samples
+    foot, bound = found(0.0)
+    assert foot == pytest.approx(truth, abs=1.5) and bound == 0.0  # the prior's height: the change starts there
+    foot, bound = found(2.7)
+    assert foot < truth - 5.0  # inward: the head's top and the prior placed it (0.35 m at 3.5 m)
+    assert bound == pytest.approx(height(foot), rel=0.05) and bound > 2.0
+    assert EMPTY_INNER >= 3  # a sample or two of soft edge (the body's round base) is no empty inner end
+    foot, bound = found(2.7, int(polar.hyp_head[i]) - 6)  # only the upper body shows
+    assert bound == pytest.approx(height(foot), rel=0.05)
 
 
 def test_two_people_whose_images_overlap_in_azimuth_are_parted_not_merged(paper_detector):
@@ -476,7 +480,7 @@ def test_two_people_whose_images_overlap_in_azimuth_are_parted_not_merged(paper_
         return People(valid=pad([True] * len(rows), False), i=i, centre=0.5 * (first + last).astype(float),
                       first=first, last=last, contrast=jnp.full(K, 100.0), excess=jnp.full(K, 1e4),
                       support=jnp.ones(K), visible=jnp.ones(K), explained=jnp.zeros((K, 4), jnp.int32),
-                      head_only=jnp.zeros(K, bool))
+                      head_only=jnp.zeros(K, bool), from_head=jnp.zeros(K, bool))
 
     def feet(d2, rows):
         d = detections_of(det, people(rows), jnp.asarray(d2 * ok))
