@@ -100,18 +100,19 @@ MARGIN_LINES, MARGIN_R, TALL_SIGMAS = 1, 3, 3.0
 TALL_CHARGE = 0.25
 TALL_EDGE = 2
 TALL_MIN = 6
-#: A foot from the head (:func:`_off_prior_height`): eq 12's extent holds the person's image and empty samples
-#: inward of it, EMPTY_INNER or more before the change starts (counted as for the taller: the first sample
-#: from which three count as the person's). Every hypothesis whose extent holds the image scores alike but
-#: for the empty samples it takes in, and the inner ones win (their extents are longer in this mirror), so
-#: the foot is where a person of the prior's height with that head's top would stand. Moving it out to
-#: where the change starts is right for a person shorter than the prior (seed 9201's person 0, 1.614 m:
-#: 0.35-0.55 m inward at 3.2-4.1 m) and wrong for legs behind furniture (six_people 9211: a 1.80-m walker
-#: whose lower legs a table hid, thrown 0.5-0.6 m outward): the change's start is sharp in both, the
-#: background's own edges do not part them, and the prior's odds of a 2.7-sigma person are 1 in 40 of
-#: one at the mean; so the foot stays, and its sigma carries the prior height's spread (docs/detection.md, "Shorter
-#: than the prior", the move tried and not kept). Two samples: the body's round base over the window's
-#: lines (the same edge as TALL_EDGE).
+#: A foot from the head (:func:`_off_prior_height`): eq 12's extent holds the person's image and empty
+#: samples inward of it, EMPTY_INNER or more before the change starts (counted as for the taller: the
+#: first sample from which three count as the person's). Every hypothesis whose extent holds the image
+#: scores alike but for the empty samples it takes in, and the inner ones win (their extents are longer
+#: in this mirror), so the foot is where a person of the prior's height with that head's top would stand.
+#: Moving it out to where the change starts is right for a person shorter than the prior (seed 9201's
+#: person 0, 1.614 m: 0.35-0.55 m inward at 3.2-4.1 m) and wrong for legs behind furniture (six_people
+#: 9211: a 1.80-m walker whose lower legs a table hid, thrown 0.5-0.6 m outward): the change's start is
+#: sharp in both, the background's own edges do not part them, and the prior's odds of a 2.7-sigma
+#: person are 1 in 40 of one at the mean; so the foot stays, and its sigma carries the prior height's
+#: spread (docs/detection.md, "Shorter than the prior": the move tried and not kept). Three samples,
+#: not one or two: the body's round base over the window's lines makes a soft edge of a sample or two
+#: at eq 12's own foot (the edge TALL_EDGE allows for).
 EMPTY_INNER = 3
 #: Feet closer than this on the floor (m) are one person's (two people's are a shoulder width apart).
 MERGE_M = 0.45
