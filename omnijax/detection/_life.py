@@ -296,7 +296,14 @@ def _judge(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: D
     # stops_a_minute 9064)
     quick = (unsettled & regions(dets, valid & sure_ghost & ~trusted, shape) & (ghost >= UNSETTLED_VOTES)
              & (still >= UNSETTLED_VOTES))
-    repair = changed & (((ghost >= rates.ghost_frames) & (still >= rates.still_frames)) | quick)
+    # the frame takes the background's place only where it continues the floor beside the sample (the
+    # nearest samples of its radius outside every detection, learnt) better than the background does: a
+    # ghost's region is its run of lines, and someone walking off the spot, in along their own line, is
+    # one detection with their ghost; the body's samples stay still from frame to frame as the image
+    # slides over them and were re-learnt with the ghost's (six_people 9202: a walker painted in, two
+    # false alarms of 190 and 210 frames)
+    floor_now = nearer_floor(detector, lines, ok & ~occupied & ~unsettled, cur, lines.mean)
+    repair = changed & floor_now & (((ghost >= rates.ghost_frames) & (still >= rates.still_frames)) | quick)
     absorb = changed & (rest >= rates.absorb_frames) & ~protected
     fix = (repair | absorb) & ok
     free = ok & ~changed & ~occupied
@@ -392,18 +399,41 @@ def set_aside_ghosts(detector: Detector, trace: DetectionTrace, lines: LineBackg
 MINORITY_FRAMES = 3.0
 
 
-def _floor_beside(detector: Detector, lines: LineBackground, frames) -> tuple[Array, Array]:
+def _floor_beside(sure: Bool[Array, "T R"]) -> tuple[Array, Array]:
     """Per polar sample, the nearest line on each side (left, right: lower and higher line index, round
-    the circle) whose sample at the same radius every learning frame but one agreed on (``frames``: the
-    learning's count): what the floor is beside a disputed sample, a body's width away at most for
-    someone's image (T x R line indices; the sample's own line where it is undisputed itself)."""
-    T = detector.polar.n_theta
-    sure = detector.polar.line_ok & (1.0 / lines.var_factor >= frames - 1.0 - 1e-3)
+    the circle) whose sample at the same radius is ``sure`` floor: what the floor is beside a disputed
+    sample, a body's width away at most for someone's image (T x R line indices; the sample's own line
+    where it is sure itself)."""
+    T = sure.shape[0]
     t = jnp.arange(2 * T)[:, None]
     twice = jnp.concatenate([sure, sure], 0)
     left = lax.cummax(jnp.where(twice, t, -1), axis=0)[T:] % T
     right = lax.cummin(jnp.where(twice, t, 2 * T), axis=0, reverse=True)[:T] % T
     return left, right
+
+
+def nearer_floor(detector: Detector, lines: LineBackground, sure: Bool[Array, "T R"], new: Float[Array, "T R 3"],
+                 old: Float[Array, "T R 3"]) -> Bool[Array, "T R"]:
+    """Whether each sample's ``new`` colour is nearer than its ``old`` one to the floor beside it (the
+    least d^2 from the background ``lines`` at the nearest ``sure`` sample of its radius, either side,
+    :func:`_floor_beside`; d^2 as the detector measures it, across the light under ``light_axis``): a
+    colour that continues the floor around it, where the other does not.
+    The one test of both re-learnings that put a sample's other colour in place of the background's:
+    the learning's minority at the start (:func:`settle_learning`) and a ghost's repair from the
+    current frame (:func:`live_step`)."""
+    left, right = _floor_beside(sure)
+    rr = jnp.broadcast_to(jnp.arange(sure.shape[1]), sure.shape)
+    beside = [(lines.mean[side, rr], lines.var_factor[side, rr]) for side in (left, right)]
+
+    def d2(colours, mean, var_factor):
+        if detector.light_axis is None:
+            return change_measure(colours, mean, var_factor, lines.sigma)
+        return change_across_light(colours, mean, var_factor, lines.sigma, detector.light_axis)
+
+    def from_floor(colours):
+        return jnp.minimum(*(d2(colours, m, v) for m, v in beside))
+
+    return from_floor(new) < from_floor(old)
 
 
 @jax.jit
@@ -432,15 +462,8 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
     the background as a ghost for the whole clip (stops_a_minute 9098: 1,536 false alarms in 1,600
     frames). Returns the settled lines and the samples that took their minority."""
     ok, idx = detector.polar.line_ok, detector.polar.line_index
-    left, right = _floor_beside(detector, lines, frames)
-    rr = jnp.broadcast_to(jnp.arange(ok.shape[1]), ok.shape)
-    floor_mean = (lines.mean[left, rr], lines.mean[right, rr])
-    floor_vf = (lines.var_factor[left, rr], lines.var_factor[right, rr])
-
-    def from_floor(colours):
-        """Least d^2 of ``colours`` (T x R x 3) from the floor beside, either side."""
-        return jnp.minimum(*(change_measure(colours, m, v, lines.sigma) for m, v in zip(floor_mean, floor_vf)))
-
+    learnt = lines  # the learning as it was: the floor beside is read from it
+    sure = ok & (1.0 / lines.var_factor >= frames - 1.0 - 1e-3)  # every learning frame but one agreed
     took = jnp.zeros(ok.shape, bool)
     for j in range(bg.minority.shape[0]):  # each candidate in turn, against the lines settled so far
         minority, minority_n = gather_rgb(bg.minority[j], idx), bg.minority_n[j].reshape(-1)[idx]
@@ -450,7 +473,7 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
         dets = locate_people(detector, d2, find_sectors(detector, d2.sum(-1)))
         ev = ghost_evidence(detector, composite, lines, d2, dets)
         floor = life_candidates(dets) & verdicts(ev, jnp.ones_like(dets.valid), edge)[0]
-        nearer = from_floor(minority) < from_floor(lines.mean)
+        nearer = nearer_floor(detector, learnt, sure, minority, lines.mean)
         take = regions(dets, floor, d2.shape) & has & (d2 > CHANGED) & nearer
         mean = jnp.where(take[..., None], minority, lines.mean)
         var_factor = jnp.where(take, 1.0 / jnp.maximum(minority_n, 1.0), lines.var_factor)

@@ -210,8 +210,9 @@ def test_polar_lines_sample_distinct_pixels(paper_detector):
     assert float(polar.samples.min()) > 0.6 * polar.n_r
 
 
-def _paint_person(rng, base, det, i, theta, tint=(1.15, 0.9, 0.95)):
-    """A wedge of changed colour exactly over hypothesis i's radial extent, a person's azimuth span wide."""
+def _paint_person(rng, base, det, i, theta, tint=(1.15, 0.9, 0.95), width=1.0):
+    """A wedge of changed colour exactly over hypothesis i's radial extent, ``width`` times a person's
+    azimuth span wide."""
     polar = det.polar
     H, W = base.shape[:2]
     cx, cy = np.asarray(det.omni.center)
@@ -219,7 +220,7 @@ def _paint_person(rng, base, det, i, theta, tint=(1.15, 0.9, 0.95)):
     r, th = np.hypot(xx - cx, yy - cy), np.arctan2(yy - cy, xx - cx)
     r_in = float(polar.radii[i])
     r_out = float(polar.radii[0] + polar.hyp_out[i])
-    half = 0.5 * float(polar.hyp_width[i])
+    half = 0.5 * width * float(polar.hyp_width[i])
     m = (r >= r_in - 0.5) & (r < r_out - 0.5) & (np.abs(np.angle(np.exp(1j * (th - theta)))) < half)
     img = base.copy()
     img[m] = img[m] * np.asarray(tint)

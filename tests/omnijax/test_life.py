@@ -88,6 +88,33 @@ def test_a_ghost_is_repaired(paper_detector, room, trusted):
     assert not bool(np.asarray(dets.valid).any())
 
 
+def test_a_ghost_is_repaired_but_not_someone_standing_in_its_run_of_lines(paper_detector, room):
+    """Someone stood through the learning and left, and someone else now stands in the middle third of
+    the ghost's run of lines: one detection with it, whose sides are the ghost's (a ghost's verdict,
+    trusted or not). The ghost's samples are re-learnt; the stander's, as still as the ghost's, are
+    not: their colour does not continue the floor beside them (six_people 9202: a walker, in along
+    their own line through such a run, was painted into the background with the ghost)."""
+    rng, base, person, i = room
+    bg = learn_background(np.stack([_noisy(rng, person) for _ in range(20)]))
+    life = start_life(line_background(paper_detector, bg))
+    now = _paint_person(rng, base, paper_detector, i, 0.7, tint=(0.6, 1.25, 0.7), width=1 / 3)
+    life, found, _ = _run(paper_detector, life, [_noisy(rng, now) for _ in range(GHOST + 4)], True, _rates())
+    assert found[GHOST - 1][1].any()  # judged a ghost while the votes gathered
+    _, trace = detect(paper_detector, jnp.asarray(_noisy(rng, now)), life.lines)
+    polar = paper_detector.polar
+    off = np.abs(np.angle(np.exp(1j * (np.asarray(polar.theta) - 0.7))))[:, None]
+    half = 0.5 * float(polar.hyp_width[i])
+    radii = np.asarray(polar.radii)[None]
+    extent = (radii >= float(polar.radii[i]) + 1) & (radii < float(polar.radii[0] + polar.hyp_out[i]) - 2)
+    ok = np.asarray(polar.line_ok) & extent
+    d2 = np.asarray(trace.d2)
+    stander = ok & (off < half / 3 - 0.01)
+    ghost = ok & (off > half / 3 + 0.01) & (off < half - 0.01)
+    assert stander.sum() > 30 and ghost.sum() > 60
+    assert np.mean(d2[stander] > CHANGED) > 0.9  # still seen: not re-learnt
+    assert np.mean(d2[ghost] > CHANGED) < 0.1  # repaired
+
+
 def test_a_ghost_the_learning_left_unsettled_is_repaired_at_once(paper_detector, room):
     """Someone stood through 12 of 30 learning frames and the floor showed in 10 of the rest: the
     background holds them (the commonest colour) but knows it is unsettled, so their ghost is repaired
