@@ -34,7 +34,11 @@ frame (:func:`live_step`, two jitted calls), after detection, with the frame's d
    changed: +1 for each frame it lies in a ghost's region, -1 for each frame it lies in a person's
    (a detection with a person's edge), none while no detection claims it or gives no verdict; a
    ghost's evidence flickers about the threshold from frame to frame, and a run of ghost frames
-   would be broken by each flicker.
+   would be broken by each flicker. Only where the frame continues the floor beside the sample (the
+   nearest samples of its radius outside every detection that the background is sure of, either
+   side) better than the background does (:func:`nearer_floor`): a ghost's region is its whole run
+   of lines, and someone in it now (walking off the spot, in along their own line, or standing in
+   its middle) is as still from frame to frame as the ghost's floor, but is not the floor.
    A sample the learning left unsettled (kept in fewer than two thirds of its frames: someone
    stood there through a third of them) is repaired after :data:`UNSETTLED_VOTES` such frames when
    the ghost shows both signs (an edge in the background, none now) and is not a trusted detection:
