@@ -34,11 +34,12 @@ frame (:func:`live_step`, two jitted calls), after detection, with the frame's d
    changed: +1 for each frame it lies in a ghost's region, -1 for each frame it lies in a person's
    (a detection with a person's edge), none while no detection claims it or gives no verdict; a
    ghost's evidence flickers about the threshold from frame to frame, and a run of ghost frames
-   would be broken by each flicker. Only where the frame continues the floor beside the sample (the
-   nearest samples of its radius outside every detection that the background is sure of, either
-   side) better than the background does (:func:`nearer_floor`): a ghost's region is its whole run
-   of lines, and someone in it now (walking off the spot, in along their own line, or standing in
-   its middle) is as still from frame to frame as the ghost's floor, but is not the floor.
+   would be broken by each flicker. In the region of a trusted detection (someone the tracker saw
+   walk in is there), only where the frame continues the floor beside the sample (the nearest
+   samples of its radius outside every detection, settled and unchanged now, either side) better
+   than the background does (:func:`nearer_floor`): a ghost's region is its whole run of lines, and
+   someone in it now (walking off the spot, in along their own line, or standing in its middle) is
+   as still from frame to frame as the ghost's floor, but is not the floor.
    A sample the learning left unsettled (kept in fewer than two thirds of its frames: someone
    stood there through a third of them) is repaired after :data:`UNSETTLED_VOTES` such frames when
    the ghost shows both signs (an edge in the background, none now) and is not a trusted detection:
@@ -300,14 +301,18 @@ def _judge(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: D
     # stops_a_minute 9064)
     quick = (unsettled & regions(dets, valid & sure_ghost & ~trusted, shape) & (ghost >= UNSETTLED_VOTES)
              & (still >= UNSETTLED_VOTES))
-    # the frame takes the background's place only where it continues the floor beside the sample (the
-    # nearest samples of its radius outside every detection, learnt) better than the background does: a
+    # in a trusted detection's region (someone the tracker saw walk in is there), the frame takes the
+    # background's place only where it continues the floor beside the sample (the nearest samples of its
+    # radius outside every detection, learnt and unchanged now) better than the background does: a
     # ghost's region is its run of lines, and someone walking off the spot, in along their own line, is
     # one detection with their ghost; the body's samples stay still from frame to frame as the image
     # slides over them and were re-learnt with the ghost's (six_people 9202: a walker painted in, two
-    # false alarms of 190 and 210 frames)
-    floor_now = nearer_floor(detector, lines, ok & ~occupied & ~unsettled, cur, lines.mean)
-    repair = changed & floor_now & (((ghost >= rates.ghost_frames) & (still >= rates.still_frames)) | quick)
+    # false alarms of 190 and 210 frames). Elsewhere nobody is known to be there, and the floor beside
+    # is not always the floor's colour (a static change one line wide, standing_start 9216, was kept)
+    floor_now = nearer_floor(detector, lines, ok & ~occupied & ~unsettled & ~changed, cur, lines.mean)
+    someone = regions(dets, valid & trusted, shape)
+    repair = (changed & (floor_now | ~someone)
+              & (((ghost >= rates.ghost_frames) & (still >= rates.still_frames)) | quick))
     absorb = changed & (rest >= rates.absorb_frames) & ~protected
     fix = (repair | absorb) & ok
     free = ok & ~changed & ~occupied

@@ -89,11 +89,12 @@ def test_a_ghost_is_repaired(paper_detector, room, trusted):
 
 
 def test_a_ghost_is_repaired_but_not_someone_standing_in_its_run_of_lines(paper_detector, room):
-    """Someone stood through the learning and left, and someone else now stands in the middle third of
-    the ghost's run of lines: one detection with it, whose sides are the ghost's (a ghost's verdict,
-    trusted or not). The ghost's samples are re-learnt; the stander's, as still as the ghost's, are
-    not: their colour does not continue the floor beside them (six_people 9202: a walker, in along
-    their own line through such a run, was painted into the background with the ghost)."""
+    """Someone stood through the learning and left, and someone the tracker trusts now stands in the
+    middle third of the ghost's run of lines: one detection with it, whose sides are the ghost's (a
+    trusted detection's ghost verdict: both signs). The ghost's samples are re-learnt; the stander's,
+    as still as the ghost's, are not: their colour does not continue the floor beside them
+    (six_people 9202: a walker, in along their own line through such a run, was painted into the
+    background with the ghost)."""
     rng, base, person, i = room
     bg = learn_background(np.stack([_noisy(rng, person) for _ in range(20)]))
     life = start_life(line_background(paper_detector, bg))
