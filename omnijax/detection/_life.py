@@ -306,8 +306,8 @@ def _judge(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: D
     # radius outside every detection, learnt and unchanged now) better than the background does: a
     # ghost's region is its run of lines, and someone walking off the spot, in along their own line, is
     # one detection with their ghost; the body's samples stay still from frame to frame as the image
-    # slides over them and were re-learnt with the ghost's (six_people 9202: a walker painted in, two
-    # false alarms of 190 and 210 frames). Elsewhere nobody is known to be there, and the floor beside
+    # slides over them and were re-learnt with the ghost's (six_people 9202: a walker painted in, a false
+    # alarm for 190 frames). Elsewhere nobody is known to be there, and the floor beside
     # is not always the floor's colour (a static change one line wide, standing_start 9216, was kept)
     floor_now = nearer_floor(detector, lines, ok & ~occupied & ~unsettled & ~changed, cur, lines.mean)
     someone = regions(dets, valid & trusted, shape)
