@@ -309,10 +309,14 @@ def _judge(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: D
     # slides over them and were re-learnt with the ghost's (six_people 9202: a walker painted in, a false
     # alarm for 190 frames). Elsewhere nobody is known to be there, and the floor beside
     # is not always the floor's colour (a static change one line wide, standing_start 9216, was kept)
-    floor_now = nearer_floor(detector, lines, ok & ~occupied & ~unsettled & ~changed, cur, lines.mean)
+    due = changed & (((ghost >= rates.ghost_frames) & (still >= rates.still_frames)) | quick)
     someone = regions(dets, valid & trusted, shape)
-    repair = (changed & (floor_now | ~someone)
-              & (((ghost >= rates.ghost_frames) & (still >= rates.still_frames)) | quick))
+    # (the test only in a frame that has such a sample due: most have none, and it is most of the life's
+    # cost, 1.4 ms of a step on one core)
+    floor_now = lax.cond(jnp.any(due & someone),
+                         lambda: nearer_floor(detector, lines, ok & ~occupied & ~unsettled & ~changed, cur, lines.mean),
+                         lambda: jnp.zeros(shape, bool))
+    repair = due & (floor_now | ~someone)
     absorb = changed & (rest >= rates.absorb_frames) & ~protected
     fix = (repair | absorb) & ok
     free = ok & ~changed & ~occupied
@@ -408,17 +412,35 @@ def set_aside_ghosts(detector: Detector, trace: DetectionTrace, lines: LineBackg
 MINORITY_FRAMES = 3.0
 
 
-def _floor_beside(sure: Bool[Array, "T R"]) -> tuple[Array, Array]:
-    """Per polar sample, the nearest line on each side (left, right: lower and higher line index, round
-    the circle) whose sample at the same radius is ``sure`` floor: what the floor is beside a disputed
-    sample, a body's width away at most for someone's image (T x R line indices; the sample's own line
-    where it is sure itself)."""
+def _floor_beside(sure: Bool[Array, "T R"], lines: LineBackground) -> tuple[tuple[Array, Array], ...]:
+    """Per polar sample, the background (``lines``' mean colour and variance factor) at the nearest line
+    on each side (left, right: lower and higher line index, round the circle) whose sample at the same
+    radius is ``sure`` floor: what the floor is beside a disputed sample, a body's width away at most
+    for someone's image (the sample's own where it is sure itself; at a radius with no sure sample, line
+    T - 1's on the left, line 0's on the right). Returns ``((mean, var_factor) left, (mean, var_factor)
+    right)``, T x R (x 3).
+
+    Two sequential ``lax.scan`` over the lines, each carrying the last sure sample's background from
+    where the circle's last (first) sure line left off: on the CPU, ``lax.cummax``/``cummin`` of line
+    indices over the circle doubled (reduce-windows) and the gathers at them took 4.6 ms a frame against
+    1.4 ms for the whole of :func:`nearer_floor` (docs/detection.md, "twenty-sixth session")."""
     T = sure.shape[0]
-    t = jnp.arange(2 * T)[:, None]
-    twice = jnp.concatenate([sure, sure], 0)
-    left = lax.cummax(jnp.where(twice, t, -1), axis=0)[T:] % T
-    right = lax.cummin(jnp.where(twice, t, 2 * T), axis=0, reverse=True)[:T] % T
-    return left, right
+    t = jnp.arange(T)[:, None]
+    r = jnp.arange(sure.shape[1])
+    found = jnp.any(sure, 0)
+    start_left = jnp.where(found, jnp.max(jnp.where(sure, t, -1), 0), T - 1)
+    start_right = jnp.where(found, jnp.min(jnp.where(sure, t, T), 0), 0)
+
+    def carry_sure(start, reverse):
+        def keep(held, row):
+            ok, mean, var_factor = row
+            held = (jnp.where(ok[:, None], mean, held[0]), jnp.where(ok, var_factor, held[1]))
+            return held, held
+
+        held = (lines.mean[start, r], lines.var_factor[start, r])
+        return lax.scan(keep, held, (sure, lines.mean, lines.var_factor), reverse=reverse)[1]
+
+    return carry_sure(start_left, False), carry_sure(start_right, True)
 
 
 def nearer_floor(detector: Detector, lines: LineBackground, sure: Bool[Array, "T R"], new: Float[Array, "T R 3"],
@@ -430,9 +452,7 @@ def nearer_floor(detector: Detector, lines: LineBackground, sure: Bool[Array, "T
     The one test of both re-learnings that put a sample's other colour in place of the background's:
     the learning's minority at the start (:func:`settle_learning`) and a ghost's repair from the
     current frame (:func:`live_step`)."""
-    left, right = _floor_beside(sure)
-    rr = jnp.broadcast_to(jnp.arange(sure.shape[1]), sure.shape)
-    beside = [(lines.mean[side, rr], lines.var_factor[side, rr]) for side in (left, right)]
+    beside = _floor_beside(sure, lines)
 
     def d2(colours, mean, var_factor):
         if detector.light_axis is None:

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from omnijax import detect, learn_background, line_background
-from omnijax.detection import CHANGED, LifeRates, ghost_evidence, learned, live_step, start_life, verdicts
+from omnijax.detection import CHANGED, LifeRates, ghost_evidence, learned, lines_from, live_step, start_life, verdicts
 from omnijax.detection._detector import change_at
+from omnijax.detection._life import _floor_beside
 from tests.omnijax.test_detection import _noisy, _paint_person
 
 #: Frames in these tests: a changed sample must stay still STILL frames and lie in a ghost GHOST frames
@@ -86,6 +87,34 @@ def test_a_ghost_is_repaired(paper_detector, room, trusted):
     assert not any(seen[GHOST + 1:])  # repaired: nothing left
     dets, _ = detect(paper_detector, jnp.asarray(_noisy(rng, base)), life.lines)
     assert not bool(np.asarray(dets.valid).any())
+
+
+@pytest.mark.parametrize("share", [0.0, 0.03, 0.3, 0.9, 1.0])
+def test_the_floor_beside_is_the_nearest_sure_sample_either_side_round_the_circle(share):
+    """:func:`_floor_beside` (two scans carrying the background) against a search line by line: per
+    sample the background at the nearest sure line at or below it and at or above it at its radius,
+    round the circle; a radius with no sure sample takes line T - 1's and line 0's. 40 lines x 9
+    radii, seed 5, one radius with none sure."""
+    rng = np.random.default_rng(5)
+    T, R = 40, 9
+    sure = rng.random((T, R)) < share
+    sure[:, 4] = False
+    mean = rng.uniform(0, 255, (T, R, 3)).astype(np.float32)
+    var_factor = rng.uniform(0.01, 1.0, (T, R)).astype(np.float32)
+    lines = lines_from(jnp.asarray(mean), jnp.asarray(var_factor), jnp.full((T, R), 2.0, jnp.float32))
+    (left_mean, left_var), (right_mean, right_var) = _floor_beside(jnp.asarray(sure), lines)
+    left, right = np.full((T, R), T - 1), np.zeros((T, R), int)
+    for r in range(R):
+        for t in range(T):
+            below = [j % T for j in range(t, t - T, -1) if sure[j % T, r]]
+            above = [j % T for j in range(t, t + T) if sure[j % T, r]]
+            left[t, r] = below[0] if below else T - 1
+            right[t, r] = above[0] if above else 0
+    r = np.arange(R)[None]
+    np.testing.assert_array_equal(np.asarray(left_mean), mean[left, r])
+    np.testing.assert_array_equal(np.asarray(left_var), var_factor[left, r])
+    np.testing.assert_array_equal(np.asarray(right_mean), mean[right, r])
+    np.testing.assert_array_equal(np.asarray(right_var), var_factor[right, r])
 
 
 def test_a_ghost_is_repaired_but_not_someone_standing_in_its_run_of_lines(paper_detector, room):
