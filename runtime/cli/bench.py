@@ -30,7 +30,9 @@ to the PTZ link, the background's life; no drawing, video or log):
                      time per frame on the pinned core: how many such cameras one
                      core keeps up with; "control" holds the details (per-frame
                      wall and CPU ms mean/p50/p90/p99, the same by the p90, the
-                     stages' medians). --no-control skips it.
+                     stages' medians; life_ms: the background's life step, which
+                     runs on after its dispatch (the "adapt" stage), waited for
+                     on the frames it steps). --no-control skips it.
 
 The process is pinned to one core (and XLA to one thread) before JAX loads.
 --json prints one JSON object keyed by frame size, e.g. "640x480", plus

@@ -117,3 +117,4 @@ def test_bench_reports_the_detector_and_the_cameras_one_core_serves(tmp_path):
     f = control["frame_ms"]
     assert 0 < f["p50"] <= f["p90"] <= f["max"]
     assert report["cameras_per_core"] == pytest.approx(1e3 / control["fps"] / f["mean"])
+    assert control["life_ms"]["n"] == 5 and control["life_ms"]["p50"] > 0  # stepped every second frame
