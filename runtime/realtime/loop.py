@@ -182,9 +182,10 @@ class RealTimeLoop:
         if self.assigner is not None:
             self.assigner.priority = self.selector.priority
         self.timings = Timings()
+        self.rate_wait_s = 1e-3 * config.rate_wait_ms
         self.on_frame, self.on_control = on_frame, on_control
         self.log_path = log_path
-        self.counts = {"frames": 0, "broken": 0, "wrong_size": 0, "commands_sent": 0, "dead_zone": 0,
+        self.counts = {"frames": 0, "broken": 0, "wrong_size": 0, "commands_sent": 0, "dead_zone": 0, "rate_held": 0,
                        "no_target": 0, "held_untrusted": 0, "held_unframeable": 0, "held_paused": 0,
                        "operator_frames": 0,
                        "invalid_geometry": 0, "deadline_overruns": 0, "tracks_over_slots": 0}
@@ -417,9 +418,9 @@ class RealTimeLoop:
     def _manual(self, frame: Frame, pointing: tuple[float, float, float], link: PtzLink) -> Command:
         """The operator's manual pointing as this frame's command for ``link``'s PTZ (sent when it changes)."""
         pan, tilt, zoom = pointing
+        send = (link.sent != pointing or link.sent_track is not None) and link.ready(frame.stamp, self.rate_wait_s)
         return Command(track=None, pan=pan, tilt=tilt, zoom=zoom, zooms=dict.fromkeys(ZOOM_RULES, zoom), sd_pan=0.0,
-                       sd_tilt=0.0, sent=link.sent != pointing or link.sent_track is not None,
-                       t_predicted=frame.stamp)
+                       sd_tilt=0.0, sent=send, t_predicted=frame.stamp)
 
     def _aim(self, frame: Frame, tracks, c, aim_of: dict[int, int], op: OperatorState | None = None) -> Command | None:
         aims: dict[int, tuple[int, Aim]] = {}
@@ -456,7 +457,8 @@ class RealTimeLoop:
 
     def _command(self, frame: Frame, c, k: int, j: int, target, aimed: Aim) -> Command:
         """PTZ ``k``'s command at track ``target`` (its aim ``aimed``, entry ``j`` of the control call's), sent
-        unless it is the track the PTZ was sent to last and within the dead zone."""
+        unless it is the track the PTZ was sent to last and within the dead zone, or the device's rate limit
+        would hold it (:meth:`PtzLink.ready`: the next frame's goes instead)."""
         link, track = self.links[k], target.id
         zooms = {rule: float(aimed.zooms[rule].zoom) for rule in ZOOM_RULES}
         pan, tilt, zoom = float(aimed.pointing.pan), float(aimed.pointing.tilt), zooms[self.cfg.zoom_rule]
@@ -466,6 +468,9 @@ class RealTimeLoop:
         send = new_target or outside_dead_zone((pan, tilt, zoom), link.sent, sd_pan, sd_tilt, self.cfg.dead_zone_sd)
         if not send:
             self.counts["dead_zone"] += 1
+        elif not link.ready(frame.stamp, self.rate_wait_s):
+            send = False
+            self.counts["rate_held"] += 1
         return Command(track=track, pan=pan, tilt=tilt, zoom=zoom, zooms=zooms, sd_pan=sd_pan,
                        sd_tilt=sd_tilt, sent=send, t_predicted=frame.stamp + float(c.lead[k, j]), aimed=aimed,
                        floor_sd=c.floor_sd[k, j], xy=np.array(target.position, float))

@@ -5,6 +5,14 @@ The loop holds one :class:`PtzLink` per PTZ of the rig, in the rig's order. Arri
 the frames' own clock (the frame's stamp plus the profile's command latency and slew time), never
 the wall clock, so that a run that processes every frame (``--pace all``) makes the same choices
 every time.
+
+The device takes at most one target per ``link.min_interval_s`` (the profile's rate limit; the driver
+enforces it on the wall clock). A command handed sooner would wait in the driver for its slot, up to
+the whole interval, aimed at where the head was predicted from an older frame: the loop hands a
+command only on a frame whose command the rate limit lets through within ``--rate-wait-ms``
+(:meth:`PtzLink.ready`, on the frames' clock), and the next frame's command, fresher, goes instead
+(``counts.rate_held``). At 25 fps and the shipped 50 ms that is every second frame while the target
+moves; the bytes then leave as the command is made (docs/runtime.md, "The rate limit and the latency").
 """
 
 from __future__ import annotations
@@ -30,6 +38,11 @@ class PtzLink:
         #: the last command sent (pan, tilt rad, zoom), when (``time.monotonic()``) and for which track
         self.sent: tuple[float, float, float] | None = None
         self.sent_at: float | None = None
+        #: when (frame clock, s) the last command sent leaves for the device: its frame's stamp, or the end of
+        #: the rate limit's interval after the one before if that is later (:meth:`ready`)
+        self.slot: float | None = None
+        #: the device's rate limit: at most one target per this many seconds (0: none known)
+        self.min_interval_s = profile.link.min_interval_s if profile is not None else 0.0
         self.sent_track: int | None = None
         self.sent_command = None  # the last Command sent
         #: the frame stamp (s) by which the PTZ should have reached :attr:`sent`
@@ -68,6 +81,11 @@ class PtzLink:
             return None
         return sent
 
+    def ready(self, stamp: float, wait_s: float = 0.0) -> bool:
+        """Whether a command handed on the frame stamped ``stamp`` would leave for the device within ``wait_s``:
+        the device's rate limit (``min_interval_s``) after the last command's slot, on the frames' clock."""
+        return self.slot is None or self.slot + self.min_interval_s - stamp <= wait_s + 1e-9  # frame-clock rounding
+
     def slew_time(self, target: tuple[float, float, float]) -> float:
         """Seconds the PTZ needs from the last command to ``target``: the device profile's command latency,
         then its slew rates and zoom speed."""
@@ -81,14 +99,16 @@ class PtzLink:
 
     def send(self, cmd, stamp: float, frame_t: float | None = None) -> None:
         """Hand ``cmd`` (a :class:`~runtime.realtime.loop.Command`) to the driver; the PTZ is expected there
-        its slew time after the frame ``stamp``. ``frame_t``: when the frame became available
+        its slew time after the command's slot (the frame ``stamp``, or the rate limit's end if later).
+        ``frame_t``: when the frame became available
         (``time.monotonic()``), for the latency to the bytes written."""
         if self.driver is not None:
             self.driver.set_target(cmd.pan, cmd.tilt, cmd.zoom)
             time.sleep(0)  # hand the GIL to the driver's worker now, so that the bytes go out at once
             if frame_t is not None:
                 self._pending[self.driver.sequence] = (frame_t, frame_t)
-        self.arrive_at = stamp + self.slew_time((cmd.pan, cmd.tilt, cmd.zoom))
+        self.slot = stamp if self.slot is None else max(stamp, self.slot + self.min_interval_s)
+        self.arrive_at = self.slot + self.slew_time((cmd.pan, cmd.tilt, cmd.zoom))
         self.sent = (cmd.pan, cmd.tilt, cmd.zoom)
         self.sent_at = time.monotonic()
         self.sent_track = cmd.track

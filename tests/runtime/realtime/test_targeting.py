@@ -241,6 +241,47 @@ def test_settling_runs_on_the_frames_clock_not_the_wall_clock(monkeypatch):
     assert link.settled(10.0 + slew)
 
 
+def test_a_command_is_handed_only_when_the_devices_rate_limit_lets_it_through_at_once(monkeypatch):
+    """The profile's ``min_interval_s`` (one target per 50 ms for the shipped VISCA camera) on the frames'
+    clock: at 25 fps a command follows the last one sent two frames later, not one (it would wait in the
+    driver 10 ms for its slot, aimed from an older frame); allowed to wait (``--rate-wait-ms``), it leaves
+    at the slot, and the slots never come sooner than the rate limit (a wait never builds up); the PTZ is
+    expected there its slew time after its slot; the wall clock plays no part."""
+    from types import SimpleNamespace as NS
+
+    from runtime.ptz import default_profile
+    from runtime.realtime import ptz_link as link_module
+    from runtime.realtime.loop import Command
+    from runtime.realtime.ptz_link import PtzLink
+
+    wall = iter(np.random.default_rng(1).uniform(0, 1e6, 1000))
+    monkeypatch.setattr(link_module, "time", NS(monotonic=lambda: float(next(wall)), sleep=lambda _s: None))
+    profile = default_profile("visca")
+    assert profile.link.min_interval_s == 0.05
+
+    def send(link, stamp):
+        link.send(Command(track=1, pan=0.1 * stamp, tilt=-0.5, zoom=1.0, zooms={}, sd_pan=0.01, sd_tilt=0.01,
+                          sent=True, t_predicted=stamp), stamp=stamp)
+
+    link = PtzLink(0, None, profile)
+    assert link.ready(0.0)  # nothing sent yet
+    send(link, 0.0)
+    assert not link.ready(0.04) and link.ready(0.08)  # 25 fps: every second frame
+    assert link.ready(0.04, wait_s=0.01) and not link.ready(0.04, wait_s=0.0099)
+    sent = []
+    for stamp in 0.04 * np.arange(2, 40):  # allowed 10 ms: two frames of three, each slot 50 ms or more apart
+        if link.ready(stamp, wait_s=0.01):
+            slew = link.slew_time((0.1 * stamp, -0.5, 1.0))
+            send(link, stamp)
+            assert link.slot - stamp <= 0.01 + 1e-12
+            sent.append(link.slot)
+    assert np.all(np.diff(sent) >= 0.05 - 1e-12) and len(sent) == 26
+    assert link.arrive_at == pytest.approx(link.slot + slew, abs=1e-12)
+    free = PtzLink(0, None, None)  # no profile: no rate limit known
+    send(free, 0.0)
+    assert free.ready(0.0)
+
+
 def test_a_track_that_stops_on_a_ghost_site_loses_trust_and_regains_it_by_walking_on():
     """A ghost track static at (2, 1) for 1.2 s marks a ghost site; a trusted track that comes to it
     loses its trust there (while the ghost is still seen, and for site_life_s after), and regains it
