@@ -28,11 +28,11 @@ class LoopConfig:
                              flag="--dwell")
     dead_zone_sd: float = setting(1.0, "send a new pan/tilt only when it moves by more than K standard deviations",
                                   unit="a number of standard deviations", metavar="K", ge=0)
-    rate_wait_ms: float = setting(5.0, "the longest a command may wait in the PTZ driver for the device's rate "
-                                  "limit (its profile's link.min_interval_s): a frame whose command would wait "
-                                  "longer holds it, and the next frame's, fresher, goes instead (counts.rate_held; a "
-                                  "large value hands every frame's command, to wait for its slot)",
-                                  unit="milliseconds", metavar="MS", ge=0)
+    rate_wait_ms: float | None = setting(None, "hand a PTZ command only on a frame whose command would wait at most "
+                                         "MS in the driver for the device's rate limit (its profile's "
+                                         "link.min_interval_s), else hold it for the next frame's (counts.rate_held); "
+                                         "default: every command, waiting for its slot (the head is predicted to "
+                                         "the slot; docs/runtime.md)", unit="milliseconds", metavar="MS", ge=0)
     # when a track is trusted as a person and may get the PTZ (runtime.realtime.targeting.TrustRule)
     trust_hits: int = setting(8, "trust a track once detected in at least M of the last --trust-window frames",
                               unit="frames", metavar="M", ge=0)

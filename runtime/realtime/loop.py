@@ -182,7 +182,7 @@ class RealTimeLoop:
         if self.assigner is not None:
             self.assigner.priority = self.selector.priority
         self.timings = Timings()
-        self.rate_wait_s = 1e-3 * config.rate_wait_ms
+        self.rate_wait_s = math.inf if config.rate_wait_ms is None else 1e-3 * config.rate_wait_ms
         self.on_frame, self.on_control = on_frame, on_control
         self.log_path = log_path
         self.counts = {"frames": 0, "broken": 0, "wrong_size": 0, "commands_sent": 0, "dead_zone": 0, "rate_held": 0,
@@ -239,7 +239,7 @@ class RealTimeLoop:
 
     def _control(self, image, t: float):
         """The compiled per-frame call on ``image`` at time ``t`` with the tracker's current slots."""
-        slew = jax.tree.map(lambda *a: np.stack(a), *[link.slew() for link in self.links])
+        slew = jax.tree.map(lambda *a: np.stack(a), *[link.slew(t) for link in self.links])
         tr = self.tracker
         return control_step(self.detector, self.rig, image, self.keeper.lines, tr.slots(self.n_slots),
                             np.asarray(t, float), tr.accel_sd, tr.nearest_gate_m, slew, mode=tr.mode,

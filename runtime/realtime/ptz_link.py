@@ -2,17 +2,19 @@
 the PTZ should be there, and the frame-to-wire latency of its commands.
 
 The loop holds one :class:`PtzLink` per PTZ of the rig, in the rig's order. Arrival is estimated on
-the frames' own clock (the frame's stamp plus the profile's command latency and slew time), never
+the frames' own clock (the command's slot, below, plus the profile's command latency and slew time), never
 the wall clock, so that a run that processes every frame (``--pace all``) makes the same choices
 every time.
 
 The device takes at most one target per ``link.min_interval_s`` (the profile's rate limit; the driver
-enforces it on the wall clock). A command handed sooner would wait in the driver for its slot, up to
-the whole interval, aimed at where the head was predicted from an older frame: the loop hands a
-command only on a frame whose command the rate limit lets through within ``--rate-wait-ms``
-(:meth:`PtzLink.ready`, on the frames' clock), and the next frame's command, fresher, goes instead
-(``counts.rate_held``). At 25 fps and the shipped 50 ms that is every second frame while the target
-moves; the bytes then leave as the command is made (docs/runtime.md, "The rate limit and the latency").
+enforces it on the wall clock, the latest target winning). The link keeps, on the frames' clock, the slot
+at which its last command leaves (its frame's stamp, or the end of the interval after the one before);
+a command handed sooner waits for its slot, so the head is predicted to the slot (:meth:`PtzLink.slew`)
+and the PTZ is expected there its slew time after it. ``--rate-wait-ms MS`` instead hands a command
+only on a frame whose command would wait at most MS (:meth:`PtzLink.ready`; the next frame's, fresher,
+goes instead, ``counts.rate_held``): the frame -> bytes latency then stays the loop's own, at the cost
+of fewer commands, and the pointing measured worse for it (docs/runtime.md, "The rate limit and the
+latency").
 """
 
 from __future__ import annotations
@@ -51,14 +53,21 @@ class PtzLink:
         #: driver sequence number -> (frame available, its loop step ended), ``time.monotonic()``
         self._pending: dict[int, tuple[float, float]] = {}
 
-    def slew(self) -> Slew:
-        """What the control call's head prediction needs of this PTZ (NumPy scalars, the loop stacks them:
-        no JAX operation runs on the control thread outside its compiled call)."""
+    def slew(self, stamp: float = 0.0) -> Slew:
+        """What the control call's head prediction needs of this PTZ on the frame stamped ``stamp`` (NumPy
+        scalars, the loop stacks them: no JAX operation runs on the control thread outside its compiled call):
+        the latency is the profile's command latency and the wait for the command's slot (:meth:`wait`)."""
         sent, profile = self.sent, self.profile
+        latency = profile.link.command_latency_s + self.wait(stamp) if profile is not None else 0.0
         return Slew(known=np.asarray(sent is not None and profile is not None),
                     pan=np.asarray(sent[0] if sent else 0.0), tilt=np.asarray(sent[1] if sent else 0.0),
                     pan_deg_s=np.asarray(self.rates[0]), tilt_deg_s=np.asarray(self.rates[1]),
-                    latency_s=np.asarray(profile.link.command_latency_s if profile is not None else 0.0))
+                    latency_s=np.asarray(latency))
+
+    def wait(self, stamp: float) -> float:
+        """Seconds a command handed on the frame stamped ``stamp`` waits for its slot (the device's rate limit
+        after the last command's slot, on the frames' clock)."""
+        return 0.0 if self.slot is None else max(0.0, self.slot + self.min_interval_s - stamp)
 
     def warm_up(self) -> None:
         """Compile the slew-time estimate."""
@@ -84,7 +93,7 @@ class PtzLink:
     def ready(self, stamp: float, wait_s: float = 0.0) -> bool:
         """Whether a command handed on the frame stamped ``stamp`` would leave for the device within ``wait_s``:
         the device's rate limit (``min_interval_s``) after the last command's slot, on the frames' clock."""
-        return self.slot is None or self.slot + self.min_interval_s - stamp <= wait_s + 1e-9  # frame-clock rounding
+        return self.wait(stamp) <= wait_s + 1e-9  # frame-clock rounding
 
     def slew_time(self, target: tuple[float, float, float]) -> float:
         """Seconds the PTZ needs from the last command to ``target``: the device profile's command latency,

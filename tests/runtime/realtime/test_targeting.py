@@ -244,9 +244,9 @@ def test_settling_runs_on_the_frames_clock_not_the_wall_clock(monkeypatch):
 def test_a_command_is_handed_only_when_the_devices_rate_limit_lets_it_through_at_once(monkeypatch):
     """The profile's ``min_interval_s`` (one target per 50 ms for the shipped VISCA camera) on the frames'
     clock: at 25 fps a command follows the last one sent two frames later, not one (it would wait in the
-    driver 10 ms for its slot, aimed from an older frame); allowed to wait (``--rate-wait-ms``), it leaves
-    at the slot, and the slots never come sooner than the rate limit (a wait never builds up); the PTZ is
-    expected there its slew time after its slot; the wall clock plays no part."""
+    driver 10 ms for its slot) when no wait is allowed (``--rate-wait-ms 0``); allowed to wait, it leaves at
+    its slot, the slots never come sooner than the rate limit, the head is predicted to the slot and the PTZ
+    is expected there its slew time after it; the wall clock plays no part."""
     from types import SimpleNamespace as NS
 
     from runtime.ptz import default_profile
@@ -268,6 +268,9 @@ def test_a_command_is_handed_only_when_the_devices_rate_limit_lets_it_through_at
     send(link, 0.0)
     assert not link.ready(0.04) and link.ready(0.08)  # 25 fps: every second frame
     assert link.ready(0.04, wait_s=0.01) and not link.ready(0.04, wait_s=0.0099)
+    # the head is predicted to when the command leaves: the profile's command latency and the wait for the slot
+    assert float(link.slew(0.04).latency_s) == pytest.approx(profile.link.command_latency_s + 0.01, abs=1e-12)
+    assert float(link.slew(0.2).latency_s) == profile.link.command_latency_s
     sent = []
     for stamp in 0.04 * np.arange(2, 40):  # allowed 10 ms: two frames of three, each slot 50 ms or more apart
         if link.ready(stamp, wait_s=0.01):
