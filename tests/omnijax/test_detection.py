@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -292,11 +293,19 @@ def test_fragments_merge_by_floor_distance_and_under_the_camera():
     np.testing.assert_array_equal(np.asarray(merge_fragments(valid, xy, inner, 0.45)), [True, False, True, True])
 
 
+@eqx.filter_jit
+def _locate(det, d2):
+    """Steps 4-6 on a table of d^2, one compiled program for the module's tests (op by op, the first
+    test that ran them took 20 s)."""
+    from omnijax.detection._detector import find_sectors, locate_people
+
+    return locate_people(det, d2, find_sectors(det, d2.sum(-1)))
+
+
 def test_a_strip_of_one_line_is_not_a_person(paper_detector):
     """On a table of d^2: one line changed strongly over a person's radii (the edge of someone's
     shadow, or of their body past their run) is found as a run of one line and dropped; the same
     change over a body's width of lines is a person."""
-    from omnijax.detection._detector import find_sectors, locate_people
 
     det = paper_detector
     polar = det.polar
@@ -308,7 +317,7 @@ def test_a_strip_of_one_line_is_not_a_person(paper_detector):
         d2 = 2.0 * ok
         d2[lines, radii] = 400.0
         d2 = jnp.asarray(d2 * ok)
-        return int(np.asarray(locate_people(det, d2, find_sectors(det, d2.sum(-1))).valid).sum())
+        return int(np.asarray(_locate(det, d2).valid).sum())
 
     assert found([100]) == 0
     width = int(np.ceil(float(polar.hyp_width[i]) / (2 * np.pi / polar.n_theta)))
@@ -327,7 +336,6 @@ def test_a_person_dressed_like_the_floor_is_found_by_their_head(paper_detector, 
     head. (At 3.6 m such a head is 13 samples a line, below psi1's threshold: the far field stays a
     limit.)"""
     from omnijax.detection._blobs import CONTRAST_FACTOR, HEAD_RUN_WIDTHS
-    from omnijax.detection._detector import find_sectors, locate_people
 
     det = paper_detector
     polar = det.polar
@@ -342,7 +350,7 @@ def test_a_person_dressed_like_the_floor_is_found_by_their_head(paper_detector, 
         d2 = 2.0 * ok
         d2[100 - half:100 + half + 1, head] += value
         d2 = jnp.asarray(d2 * ok)
-        d = locate_people(det, d2, find_sectors(det, d2.sum(-1)))
+        d = _locate(det, d2)
         return list(np.flatnonzero(np.asarray(d.valid))), d
 
     ks, d = found(30.0, head_half)
@@ -367,7 +375,6 @@ def _one_person_on_a_table(det, i, layers):
     """The one detection of a person drawn on a table of d^2 (the background at its model mean, 2): on
     lines 100 +- half the model's width at foot hypothesis ``i``, ``value`` added over radii ``a .. b``
     for each ``(a, b, value)`` of ``layers``."""
-    from omnijax.detection._detector import find_sectors, locate_people
 
     polar = det.polar
     ok = np.asarray(polar.line_ok, np.float32)
@@ -376,7 +383,7 @@ def _one_person_on_a_table(det, i, layers):
     for a, b, value in layers:
         d2[100 - half:100 + half + 1, a:b] += value
     d2 = jnp.asarray(d2 * ok)
-    d = locate_people(det, d2, find_sectors(det, d2.sum(-1)))
+    d = _locate(det, d2)
     ks = list(np.flatnonzero(np.asarray(d.valid)))
     assert len(ks) == 1
     return float(d.r_f[ks[0]]), float(d.bound_r_f[ks[0]])
