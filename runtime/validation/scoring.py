@@ -122,6 +122,9 @@ class DemoScorer:
         self.H_p = np.asarray(world.people.H_p)
         self.rigs = [world.rig.ptz(k) for k in range(K)]
         self.arrived: list[list[tuple]] = [[] for _ in range(K)]  # per PTZ, arrived frames waiting to be scored
+        self.arrived_people: list[list[int]] = [[] for _ in range(K)]  # the person of each of those frames
+        # per person: frames, NEES, pan's and tilt's squared error over variance (pointing()["people"])
+        self.person_nees = np.zeros((len(self.H_p), 4))
         self.arrived_no_person = 0
         self.nees_sums = np.zeros(5)  # frames, NEES, NEES^2, pan's and tilt's squared error over variance
         self.nees_over = 0
@@ -192,6 +195,7 @@ class DemoScorer:
         queue = self.arrived[camera]
         queue.append((held.pan, held.tilt, np.asarray(a.covariance.cov), float(a.pointing.distance),
                       float(a.pointing.slant), pos[k], self.H_p[k], self.R_h[k]))
+        self.arrived_people[camera].append(k)
         if len(queue) == BATCH:
             self._score_arrived(camera)
 
@@ -207,7 +211,10 @@ class DemoScorer:
         self.nees_sums += [n, v.sum(), (v * v).sum(), pan_sq.sum(), tilt_sq.sum()]
         self.nees_over += int((v > NEES_95_2DOF).sum())
         self.arrived_inside += inside.sum(0)
+        np.add.at(self.person_nees, np.asarray(self.arrived_people[camera], int),
+                  np.stack([np.ones(n), v, pan_sq, tilt_sq], 1))
         queue.clear()
+        self.arrived_people[camera].clear()
 
     def pointing(self) -> dict:
         """``summary.json``'s ``pointing``: the NEES of the held pointing on the arrived frames of every PTZ
@@ -222,14 +229,20 @@ class DemoScorer:
                        tilt_nees_mean=st / n)
             if n > 1:
                 out["nees_mean_se"] = float(np.sqrt(max(s2 - s1 * s1 / n, 0.0) / (n - 1) / n) / 2)
-        out.update(frames=n, no_person=self.arrived_no_person,
+        people = [{"person": i, "H_p_m": round(float(self.H_p[i]), 4), "frames": int(m),
+                   "nees_mean": v / m / 2 if m else None, "pan_nees_mean": pan / m if m else None,
+                   "tilt_nees_mean": tilt / m if m else None}
+                  for i, (m, v, pan, tilt) in enumerate(self.person_nees)]
+        out.update(frames=n, no_person=self.arrived_no_person, people=people,
                    curve=[{"rule": rule, "p_contain": p, "rate": self.arrived_inside[i, j] / n if n else None,
                            "trials": n} for j, rule in enumerate(RULES) for i, p in enumerate(P_CONTAIN)],
                    meaning="frames on which a PTZ had arrived at the command it held on its target: the held "
                            "pan/tilt against the true head direction at the frame's time, under the held aim's "
                            "covariance; nees_mean per degree of freedom (1 when the covariance is right), "
                            "nees_over_5_99 the share above chi-square(2)'s 95 % point (0.05 when right); curve: "
-                           "the head in the frame at each rule's zoom for each p_contain from that covariance")
+                           "the head in the frame at each rule's zoom for each p_contain from that covariance; "
+                           "people: the same per person of the world (their true height H_p_m): a person far "
+                           "from the height prior shows here")
         return out
 
     def _add_trial(self, index: int, camera: int, command, tracks) -> int | None:

@@ -129,6 +129,11 @@ def test_demo_contract(demo_out):
     assert pt["frames"] > 0 and pt["nees_mean"] > 0 and 0 <= pt["nees_over_5_99"] <= 1
     assert {(c["rule"], c["p_contain"]) for c in pt["curve"]} == {(r, p) for r in ("paper", "calibrated")
                                                                  for p in (0.9, 0.95, 0.99)}
+    # per person: the frames add up, and the NEES is the frames' weighted mean of theirs
+    people = [q for q in pt["people"] if q["frames"]]
+    assert sum(q["frames"] for q in pt["people"]) == pt["frames"] and len(pt["people"]) == len(cov["people"])
+    assert sum(q["nees_mean"] * q["frames"] for q in people) / pt["frames"] == pytest.approx(pt["nees_mean"])
+    assert all(1.0 < q["H_p_m"] < 2.5 for q in pt["people"])
     assert s["ptz_homed"] and s["emulator"]["pan_deg"] == 0 and s["emulator"]["zoom"] == 1
     # start-up's objects are frozen out of the collector's sight: no collection in the loop scans them
     # (before, a full one grew to 352 ms mid-run and dropped frames; docs/runtime.md)

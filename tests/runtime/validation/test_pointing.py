@@ -83,6 +83,8 @@ def test_demo_scorer_pointing_on_arrived_frames(paper_rig, caplog):
     scorer._add_arrived(0, 0, cmd, [SimpleNamespace(id=7, position=foot + 3.0)])
     s = scorer.pointing()
     assert s["frames"] == 512 and s["no_person"] == 1
+    assert sum(q["frames"] for q in s["people"]) == 512  # per person, the same frames
+    assert sum(q["nees_mean"] * q["frames"] for q in s["people"] if q["frames"]) / 512 == pytest.approx(s["nees_mean"])
     assert abs(s["nees_mean"] - 1) < 4 / math.sqrt(512)
     assert {(c["rule"], c["p_contain"]) for c in s["curve"]} == {(r, p) for r in ("paper", "calibrated")
                                                                  for p in pt.P_CONTAIN}
