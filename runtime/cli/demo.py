@@ -277,6 +277,12 @@ def _report(s: dict, out) -> None:
               f"{pt['nees_mean']:.3f} (1 when the covariance is right), P(NEES > 5.99) {pt['nees_over_5_99']:.3f} "
               f"(0.05); head in frame at p_contain 0.9/0.95/0.99: "
               + ", ".join(f"{rule} {rates}" for rule, rates in by_rule.items()))
+        people = [q for q in pt.get("people", ()) if q["frames"]]
+        if len(people) > 1:
+            worst = max(people, key=lambda q: q["nees_mean"])
+            print(f"  pointing per person: the worst person {worst['person']} ({worst['H_p_m']:.2f} m tall), NEES "
+                  f"{worst['nees_mean']:.3f} (tilt {worst['tilt_nees_mean']:.3f}) on {worst['frames']} frames; "
+                  "each person in summary.json pointing.people")
     fe = s["foot_error_m"]["rms"]
     print(f"  detection: miss rate {d['miss_rate'] or 0:.4f}, false alarms {d['false_alarm_rate'] or 0:.4f} "
           f"of detections; foot error RMS {fe if fe is not None else float('nan'):.3f} m")

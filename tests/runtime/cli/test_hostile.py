@@ -235,6 +235,18 @@ def test_demo_lists_only_what_it_wrote(capsys):
     _report(summary, "o")
     listed = "demo outputs: o/ (summary.json, log.jsonl, annotated.mp4, view.png)"
     assert capsys.readouterr().out.splitlines()[-1] == listed
+    # the loop's pointing: the person it frames worst is named, with their height
+    people = [{"person": 0, "H_p_m": 1.743, "frames": 227, "nees_mean": 0.585, "pan_nees_mean": 1.03,
+               "tilt_nees_mean": 0.156},
+              {"person": 1, "H_p_m": 1.886, "frames": 272, "nees_mean": 4.577, "pan_nees_mean": 1.79,
+               "tilt_nees_mean": 7.608},
+              {"person": 2, "H_p_m": 1.7, "frames": 0, "nees_mean": None, "pan_nees_mean": None,
+               "tilt_nees_mean": None}]
+    summary["pointing"] = {"frames": 499, "nees_mean": 2.78, "nees_over_5_99": 0.2, "people": people,
+                           "curve": [{"rule": "calibrated", "p_contain": 0.99, "rate": 0.8, "trials": 499}]}
+    _report(summary, "o")
+    assert ("  pointing per person: the worst person 1 (1.89 m tall), NEES 4.577 (tilt 7.608) on 272 frames; each "
+            "person in summary.json pointing.people") in capsys.readouterr().out.splitlines()
 
 
 # ------------------------------------------------------------------------------------------
