@@ -8,7 +8,8 @@ every time.
 
 The device takes at most one target per ``link.min_interval_s`` (the profile's rate limit; the driver
 enforces it on the wall clock, the latest target winning). The link keeps, on the frames' clock, the slot
-at which its last command leaves (its frame's stamp, or the end of the interval after the one before);
+at which its last command leaves (its frame's stamp, or the end of the interval after the one before,
+or the one before's own slot if it had not left yet: the latest target replaces it there);
 a command handed sooner waits for its slot, so the head is predicted to the slot (:meth:`PtzLink.slew`)
 and the PTZ is expected there its slew time after it. ``--rate-wait-ms MS`` instead hands a command
 only on a frame whose command would wait at most MS (:meth:`PtzLink.ready`; the next frame's, fresher,
@@ -40,8 +41,7 @@ class PtzLink:
         #: the last command sent (pan, tilt rad, zoom), when (``time.monotonic()``) and for which track
         self.sent: tuple[float, float, float] | None = None
         self.sent_at: float | None = None
-        #: when (frame clock, s) the last command sent leaves for the device: its frame's stamp, or the end of
-        #: the rate limit's interval after the one before if that is later (:meth:`ready`)
+        #: when (frame clock, s) the last command sent leaves for the device (:meth:`_slot_for`)
         self.slot: float | None = None
         #: the device's rate limit: at most one target per this many seconds (0: none known)
         self.min_interval_s = profile.link.min_interval_s if profile is not None else 0.0
@@ -67,7 +67,15 @@ class PtzLink:
     def wait(self, stamp: float) -> float:
         """Seconds a command handed on the frame stamped ``stamp`` waits for its slot (the device's rate limit
         after the last command's slot, on the frames' clock)."""
-        return 0.0 if self.slot is None else max(0.0, self.slot + self.min_interval_s - stamp)
+        return max(0.0, self._slot_for(stamp) - stamp)
+
+    def _slot_for(self, stamp: float) -> float:
+        """When a command handed on the frame stamped ``stamp`` leaves: the driver sends the latest target, so
+        one handed before the last command's slot replaces it there; after it, it leaves the rate limit's
+        interval after that slot, or at once if that has passed."""
+        if self.slot is None:
+            return stamp
+        return self.slot if stamp < self.slot else max(stamp, self.slot + self.min_interval_s)
 
     def warm_up(self) -> None:
         """Compile the slew-time estimate."""
@@ -116,7 +124,7 @@ class PtzLink:
             time.sleep(0)  # hand the GIL to the driver's worker now, so that the bytes go out at once
             if frame_t is not None:
                 self._pending[self.driver.sequence] = (frame_t, frame_t)
-        self.slot = stamp if self.slot is None else max(stamp, self.slot + self.min_interval_s)
+        self.slot = self._slot_for(stamp)
         self.arrive_at = self.slot + self.slew_time((cmd.pan, cmd.tilt, cmd.zoom))
         self.sent = (cmd.pan, cmd.tilt, cmd.zoom)
         self.sent_at = time.monotonic()

@@ -280,6 +280,16 @@ def test_a_command_is_handed_only_when_the_devices_rate_limit_lets_it_through_at
             sent.append(link.slot)
     assert np.all(np.diff(sent) >= 0.05 - 1e-12) and len(sent) == 26
     assert link.arrive_at == pytest.approx(link.slot + slew, abs=1e-12)
+    # every frame's command (the default): the driver sends the latest target at each slot, so a command
+    # handed before the last one left replaces it there, and no wait grows beyond the interval
+    every = PtzLink(0, None, profile)
+    slots = []
+    for stamp in 0.04 * np.arange(0, 100):
+        assert every.wait(stamp) <= 0.05 + 1e-12
+        send(every, stamp)
+        slots.append(every.slot)
+    distinct = np.unique(np.round(slots, 9))
+    assert np.all(np.diff(distinct) >= 0.05 - 1e-9) and len(distinct) == 81  # 0 .. 4 s, one target per 50 ms
     free = PtzLink(0, None, None)  # no profile: no rate limit known
     send(free, 0.0)
     assert free.ready(0.0)
