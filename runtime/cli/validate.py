@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 HELP = "characterise a rig: eq 5 and the pointing variances against Monte Carlo, with maps"
 DESCRIPTION = """\
@@ -162,13 +164,24 @@ def run(args: argparse.Namespace) -> int:
     report: dict = {"config": str(args.config), "camera_model": rig.omni.model, "quick": args.quick,
                     "seed": args.seed}
     timing: dict = {}
-    with staged_output(args.out) as stage, tqdm(total=7, desc="validate", unit="step") as bar:
+    # the figures are drawn on one thread of their own (matplotlib's pyplot is used by no other) once the
+    # rendered trials have started (``go``: their set-up traces Python as the figures do; the trials run
+    # compiled code): they took 6-8 s of a 60-s `validate --quick`, mostly matplotlib's constrained layout
+    go = threading.Event()
+    with staged_output(args.out) as stage, tqdm(total=7, desc="validate", unit="step") as bar, \
+            ThreadPoolExecutor(max_workers=1, thread_name_prefix="figures") as figures:
+        figures.submit(go.wait)
+        drawn = []
+
+        def draw(figure, *figure_args) -> None:
+            drawn.append(figures.submit(figure, *figure_args))
+
         bar.set_postfix_str("chroma: eq 5 vs Monte Carlo")
         sigma = float(rig.detection.sensor_sigma)
         chroma, chroma_maps = chroma_check(sigma, samples=20_000 if args.quick else 100_000,
                                            step=16 if args.quick else 8, seed=args.seed)
         report["chroma"] = chroma
-        chroma_figure(chroma_maps, stage / "chroma.png", chroma["blue"], sigma)
+        draw(chroma_figure, chroma_maps, stage / "chroma.png", chroma["blue"], sigma)
         bar.update(1)
 
         def progress(stage_name, frac):
@@ -180,13 +193,20 @@ def run(args: argparse.Namespace) -> int:
         report["ptz"] = ptz
         bar.update(1)
         for q in QUANTITIES:
-            bar.set_postfix_str(f"maps: {q}")
-            ptz_figure(maps, rig, q, stage / f"ptz_{q}.png", args.min_distance)
-            bar.update(1)
+            draw(ptz_figure, maps, rig, q, stage / f"ptz_{q}.png", args.min_distance)
         timing["chroma_ptz_maps_s"] = time.perf_counter() - t0
         bar.set_postfix_str("Table 1, rates, containment: rendering and detecting")
-        _end_to_end(args, rig, scenario, scenario_name, counts, report, timing, stage)
+        try:
+            _end_to_end(args, rig, scenario, scenario_name, counts, report, timing, stage, draw, go)
+        finally:
+            go.set()
         bar.update(1)
+        bar.set_postfix_str("figures")
+        t = time.perf_counter()
+        for done in drawn:
+            done.result()  # a figure that failed fails the run here, before report.json is written
+        timing["figures_wait_s"] = time.perf_counter() - t
+        bar.update(bar.total - bar.n)
         report["seconds"] = time.perf_counter() - t0
         report["timing"] = timing
         report["versions"] = {"python": platform.python_version(), "jax": jax.__version__}
@@ -226,8 +246,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _end_to_end(args, rig, scenario, scenario_name, counts, report, timing, stage) -> None:
-    """Table 1 (both variants), rates and containment on rendered frames, with their figures."""
+def _end_to_end(args, rig, scenario, scenario_name, counts, report, timing, stage, draw, go) -> None:
+    """Table 1 (both variants), rates and containment on rendered frames, with their figures (handed to
+    ``draw(figure_function, *args)``); ``go`` is set once the trials are set up (figures may be drawn)."""
     import jax
     import numpy as np
     from tqdm import tqdm
@@ -239,6 +260,7 @@ def _end_to_end(args, rig, scenario, scenario_name, counts, report, timing, stag
     t = time.perf_counter()
     bench = e.prepare(rig, scenario, seed=args.seed, foot_mc_profiles=64 if args.quick else None)
     timing["world_detector_background_s"] = time.perf_counter() - t
+    go.set()
     key = jax.random.key(args.seed)
     n_pos = len(bench.positions)
     fixed, paper, fresh = [], [], []
@@ -293,7 +315,8 @@ def _end_to_end(args, rig, scenario, scenario_name, counts, report, timing, stag
     report["framing"] = e.framing(rig, fresh, names, p_main)
     report["pointing"] = e.pointing_report(rig, fresh)
     timing["statistics_s"] = time.perf_counter() - t
-    positions_figure(rig, np.asarray(bench.positions), stage / "table1_positions.png")
-    table1_figure({"fixed rig: detection and person sigmas": report["table1"],
-                   "fresh rig per trial, full propagation": report["table1_full_propagation"]}, stage / "table1.png")
-    containment_figure(curve, stage / "containment.png")
+    draw(positions_figure, rig, np.asarray(bench.positions), stage / "table1_positions.png")
+    draw(table1_figure, {"fixed rig: detection and person sigmas": report["table1"],
+                         "fresh rig per trial, full propagation": report["table1_full_propagation"]},
+         stage / "table1.png")
+    draw(containment_figure, curve, stage / "containment.png")
