@@ -410,6 +410,28 @@ def test_a_ghost_beside_furniture_is_still_a_ghost(paper_detector, room):
         assert bool(ghost[k]) and not bool(person[k])
 
 
+def test_a_faint_detection_whose_edge_moved_sides_is_a_ghost():
+    """An edge of the background displaced by a few lines (three_people 9239, the sides' figures measured
+    there): the frame has on the left the edge the background has on the right, so the left looks like a
+    person's edge and the right like a ghost's. Faint (the detection's samples hardly changed), it is a
+    ghost, trusted or not; the same sides with a person's contrast (someone standing against a table of
+    their colour) stay a person, and a faint detection with a person's edge on both sides (someone
+    dressed like the floor) too."""
+    from omnijax.detection import Evidence
+
+    displaced = ([45.0, 0.3], [4.3, 41.0])
+    walker = ([35.0, 31.0], [0.0, 0.0])
+    ev = Evidence(edge_now=jnp.array([displaced[0], displaced[0], walker[0]]),
+                  edge_before=jnp.array([displaced[1], displaced[1], walker[1]]),
+                  samples=jnp.array([[9.0, 4.0], [9.0, 4.0], [20.0, 10.0]]))
+    faint = jnp.array([True, False, True])
+    for trusted in (False, True):
+        ghost, person = (np.asarray(v) for v in verdicts(ev, jnp.full(3, trusted), 6.0, faint))
+        assert ghost.tolist() == [True, False, False] and person.tolist() == [False, True, True]
+        ghost, person = (np.asarray(v) for v in verdicts(ev, jnp.full(3, trusted), 6.0))  # contrast unknown
+        assert not ghost.any() and person.all()
+
+
 def test_a_ghost_is_judged_without_another_persons_samples(paper_detector, room):
     """A ghost of the learning whose run of lines takes in the body of someone nearer the camera (who
     stood far out through the learning, then walked in along their own azimuth): at its left side the
