@@ -171,47 +171,50 @@ def run(args: argparse.Namespace) -> int:
     with staged_output(args.out) as stage, tqdm(total=7, desc="validate", unit="step") as bar, \
             ThreadPoolExecutor(max_workers=1, thread_name_prefix="figures") as figures:
         figures.submit(go.wait)
-        drawn = []
-
-        def draw(figure, *figure_args) -> None:
-            drawn.append(figures.submit(figure, *figure_args))
-
-        bar.set_postfix_str("chroma: eq 5 vs Monte Carlo")
-        sigma = float(rig.detection.sensor_sigma)
-        chroma, chroma_maps = chroma_check(sigma, samples=20_000 if args.quick else 100_000,
-                                           step=16 if args.quick else 8, seed=args.seed)
-        report["chroma"] = chroma
-        draw(chroma_figure, chroma_maps, stage / "chroma.png", chroma["blue"], sigma)
-        bar.update(1)
-
-        def progress(stage_name, frac):
-            bar.set_postfix_str(f"ptz: {stage_name} {100 * frac:.0f}%")
-
-        ptz, maps = ptz_check(rig, step_px=step, min_distance=args.min_distance, rel_tol=rel_tol,
-                              max_trials=100_000 if args.quick else 400_000, seed=args.seed,
-                              progress=progress)
-        report["ptz"] = ptz
-        bar.update(1)
-        for q in QUANTITIES:
-            draw(ptz_figure, maps, rig, q, stage / f"ptz_{q}.png", args.min_distance)
-        timing["chroma_ptz_maps_s"] = time.perf_counter() - t0
-        bar.set_postfix_str("Table 1, rates, containment: rendering and detecting")
         try:
+            drawn = []
+
+            def draw(figure, *figure_args) -> None:
+                drawn.append(figures.submit(figure, *figure_args))
+
+            bar.set_postfix_str("chroma: eq 5 vs Monte Carlo")
+            sigma = float(rig.detection.sensor_sigma)
+            chroma, chroma_maps = chroma_check(sigma, samples=20_000 if args.quick else 100_000,
+                                               step=16 if args.quick else 8, seed=args.seed)
+            report["chroma"] = chroma
+            draw(chroma_figure, chroma_maps, stage / "chroma.png", chroma["blue"], sigma)
+            bar.update(1)
+
+            def progress(stage_name, frac):
+                bar.set_postfix_str(f"ptz: {stage_name} {100 * frac:.0f}%")
+
+            ptz, maps = ptz_check(rig, step_px=step, min_distance=args.min_distance, rel_tol=rel_tol,
+                                  max_trials=100_000 if args.quick else 400_000, seed=args.seed,
+                                  progress=progress)
+            report["ptz"] = ptz
+            bar.update(1)
+            for q in QUANTITIES:
+                draw(ptz_figure, maps, rig, q, stage / f"ptz_{q}.png", args.min_distance)
+            timing["chroma_ptz_maps_s"] = time.perf_counter() - t0
+            bar.set_postfix_str("Table 1, rates, containment: rendering and detecting")
             _end_to_end(args, rig, scenario, scenario_name, counts, report, timing, stage, draw, go)
+            bar.update(1)
+            bar.set_postfix_str("figures")
+            t = time.perf_counter()
+            for done in drawn:
+                done.result()  # a figure that failed fails the run here, before report.json is written
+            timing["figures_wait_s"] = time.perf_counter() - t
+            bar.update(bar.total - bar.n)
+            report["seconds"] = time.perf_counter() - t0
+            report["timing"] = timing
+            report["versions"] = {"python": platform.python_version(), "jax": jax.__version__}
+            (stage / "report.json").write_text(dumps(report) + "\n")
+            (stage / "report.md").write_text(report_markdown(report) + "\n")
+        except BaseException:  # a failure (or Ctrl-C) draws no more figures; the one being drawn ends
+            figures.shutdown(wait=False, cancel_futures=True)
+            raise
         finally:
-            go.set()
-        bar.update(1)
-        bar.set_postfix_str("figures")
-        t = time.perf_counter()
-        for done in drawn:
-            done.result()  # a figure that failed fails the run here, before report.json is written
-        timing["figures_wait_s"] = time.perf_counter() - t
-        bar.update(bar.total - bar.n)
-        report["seconds"] = time.perf_counter() - t0
-        report["timing"] = timing
-        report["versions"] = {"python": platform.python_version(), "jax": jax.__version__}
-        (stage / "report.json").write_text(dumps(report) + "\n")
-        (stage / "report.md").write_text(report_markdown(report) + "\n")
+            go.set()  # never leave the figures' thread waiting for the trials
     c, p = report["chroma"], report["ptz"]
     print(f"chroma: eq 5 vs Monte Carlo max rel {c['max_rel_diff']:.4f} "
           f"(sampling ~{c['expected_sampling_rel']:.4f}); eq 5 vs jax Jacobian {c['eq5_vs_jacobian_max_rel']:.1e}")

@@ -144,3 +144,32 @@ def test_validate_failure_leaves_nothing_behind(tmp_path, capsys):
     assert main(["validate", "--config", str(bad), "--out", str(out), "--quick"]) == 2
     assert not out.exists() and not list(tmp_path.glob(".*partial*"))
     assert "room.floor: unknown key" in capsys.readouterr().err
+
+
+def test_validate_failing_midway_ends_and_leaves_nothing_behind(tmp_path, monkeypatch):
+    """A failure after the figures' thread started (here the PTZ check, once the chroma figure was
+    handed to that thread) ends the run with the error, nothing written: the thread is not left
+    waiting for the trials that will never start (it used to wait for them, and the run with it)."""
+    import threading
+
+    import runtime.validation.theory as theory
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("ptz check broke")
+
+    monkeypatch.setattr(theory, "ptz_check", broken)
+    out = tmp_path / "val"
+    raised = []
+
+    def run():
+        try:
+            main(["validate", "--config", PAPER, "--out", str(out), "--quick", "--no-cache"])
+        except RuntimeError as exc:
+            raised.append(str(exc))
+
+    worker = threading.Thread(target=run, daemon=True)
+    worker.start()
+    worker.join(300)
+    assert not worker.is_alive(), "validate hung after a failure"
+    assert raised == ["ptz check broke"]
+    assert not out.exists() and not list(tmp_path.glob(".*partial*"))
