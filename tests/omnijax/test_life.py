@@ -432,6 +432,27 @@ def test_a_faint_detection_whose_edge_moved_sides_is_a_ghost():
         assert not ghost.any() and person.all()
 
 
+def test_a_side_where_the_background_had_a_persons_edge_allows_a_little_edge_now():
+    """standing_start 9253 (the sides' figures measured there, frames 323-470): a trusted ghost (a walker's
+    body re-learnt as it left the spot it stood on through the learning) whose open side measures 5-10
+    now against 800 in the background, and 20-30 against 590 on the other: judged a ghost only in the
+    frames its open side fell under ``ghost_edge``, 6 of 150. Against a person's edge in the background,
+    up to twice ``ghost_edge`` is no edge now. A side of the floor's own texture (before under
+    ASIDE_BEFORE) keeps the plain threshold, and a person's edge on the other side still vetoes (someone
+    standing at the edge of their own ghost)."""
+    from omnijax.detection import Evidence
+
+    ghost = ([28.7, 8.3], [584.8, 826.0])
+    texture = ([28.7, 8.3], [60.0, 90.0])  # the background's edge a floor's, not a person's
+    walker = ([310.0, 8.3], [12.0, 826.0])  # a person's edge now on the left: the right is their ghost
+    ev = Evidence(edge_now=jnp.array([ghost[0], texture[0], walker[0]]),
+                  edge_before=jnp.array([ghost[1], texture[1], walker[1]]),
+                  samples=jnp.array([[38.0, 39.0], [38.0, 39.0], [12.0, 4.0]]))
+    for trusted in (False, True):
+        g, p = (np.asarray(v) for v in verdicts(ev, jnp.full(3, trusted), 6.0))
+        assert g.tolist() == [True, False, False] and p.tolist() == [False, False, True]
+
+
 def test_a_ghost_is_judged_without_another_persons_samples(paper_detector, room):
     """A ghost of the learning whose run of lines takes in the body of someone nearer the camera (who
     stood far out through the learning, then walked in along their own azimuth): at its left side the
