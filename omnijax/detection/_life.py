@@ -212,13 +212,17 @@ def ghost_evidence(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBa
         rb = jnp.broadcast_to(r, b.shape)
         sig = jnp.broadcast_to(sigma[a, rr][:, None], b.shape)
 
+        # a flank sample inside another person's region shows that person, not what adjoins this one's side:
+        # a faint ghost beside someone standing took their body for its own edge now (standing_start 9263)
+        flank_ok = ok[b, rb] & ~_elsewhere(dets, b, rb, T)
+
         def least(colours, var_factor):
             inside = jnp.broadcast_to(colours[a, rr][:, None], (*b.shape, 3))
             if detector.light_axis is None:
                 d = change_measure(inside, colours[b, rb], var_factor[b, rb], sig)
             else:  # the lights' own gradients (a lamp's pool of another colour) are no object's edge
                 d = change_across_light(inside, colours[b, rb], var_factor[b, rb], sig, detector.light_axis)
-            return jnp.min(jnp.where(ok[b, rb], d, jnp.inf), axis=1)
+            return jnp.min(jnp.where(flank_ok, d, jnp.inf), axis=1)
 
         now = least(cur, jnp.ones_like(lines.var_factor))
         before = least(lines.mean, lines.var_factor)
@@ -232,17 +236,18 @@ def ghost_evidence(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBa
                     samples=jnp.stack([n_l, n_r], -1).astype(jnp.float32))
 
 
-def _elsewhere(dets: Detections, a: Array, rr: Array, T: int) -> Bool[Array, "K R"]:
-    """Whether the sample (line ``a[k, i]``, radius index ``rr[k, i]``) measured for detection ``k`` lies
+def _elsewhere(dets: Detections, a: Array, rr: Array, T: int) -> Bool[Array, "K ..."]:
+    """Whether the sample (line ``a[k, ...]``, radius index ``rr[k, ...]``) measured for detection ``k`` lies
     in the explained region of another person (a valid detection). Such a sample speaks for that person,
     not for ``k``: a ghost of the learning whose run of lines took in the body of someone standing nearer
     the camera at its azimuth (who had stood far out through the learning and then walked in along
     their own line) showed that person's edge as its own and was never judged (standing_start 9035:
     70 frames, 2.8 s)."""
-    in_lines, in_radii = _in_region(dets, a, rr, T)  # (J, K, R): person j's region at k's samples
+    in_lines, in_radii = _in_region(dets, a, rr, T)  # (J, K, ...): person j's region at k's samples
     K = a.shape[0]
     other = dets.valid[:, None] & ~jnp.eye(K, dtype=bool)  # (J, K): person j, not k itself
-    return jnp.any(other[..., None] & in_lines & in_radii, axis=0)
+    other = other.reshape(*other.shape, *([1] * (a.ndim - 1)))
+    return jnp.any(other & in_lines & in_radii, axis=0)
 
 
 def _side_means(now, before, measured):

@@ -482,6 +482,36 @@ def test_a_ghost_is_judged_without_another_persons_samples(paper_detector, room)
             assert float(ev.edge_now[k, 0]) > 50 and bool(person[k]) and not bool(ghost[k])
 
 
+def test_a_ghost_beside_someone_standing_does_not_take_their_body_for_its_edge(paper_detector, room):
+    """A ghost of the learning with someone standing just beyond its left edge (standing_start 9263: a
+    faint ghost where a person had stood through most of the learning, the left flank samples on another
+    person's body): measured against that body, the left side had an edge now of 55-100 against 6 in
+    the background, a person's edge, which vetoed the ghost for 70 frames. The flank samples inside
+    another person's region are not this one's surroundings: the left side is measured without them
+    (here not at all) and the open right side says ghost."""
+    import equinox as eqx
+
+    from omnijax.detection import ghost_evidence, lines_from
+
+    det = paper_detector
+    T = det.polar.n_theta
+    lines, dets, cur, mean, d2, k, first, last, r0, r1 = _a_ghost_in_polar(det, room)
+    beyond = ((first - 1 - np.arange(12)) % T)[:, None], np.arange(r0, r1)[None]  # the flanks' lines and more
+    floor = mean[(last + 8) % T, r0:r1][None]
+    cur[beyond], mean[beyond], d2[beyond] = (170.0, 40.0, 170.0), floor, 1000.0
+    lines = lines_from(jnp.asarray(mean), lines.var_factor, lines.sigma)
+    j = int(np.argmin(np.asarray(dets.valid)))  # a free slot for the stander's detection
+    region = dets.region.at[j].set(jnp.array([first - 12, first - 1, r0, r1], dets.region.dtype))
+    for theirs in (False, True):
+        with_stander = eqx.tree_at(lambda d: (d.valid, d.region), dets, (dets.valid.at[j].set(theirs), region))
+        ev = ghost_evidence(det, jnp.asarray(cur), lines, jnp.asarray(d2), with_stander)
+        ghost, person = verdicts(ev, jnp.zeros(dets.valid.shape, bool), 6.0)
+        if theirs:  # the stander is someone's detection: the left side is not measured against them
+            assert float(ev.samples[k, 0]) == 0 and bool(ghost[k]) and not bool(person[k])
+        else:  # nobody's: the body beyond the left edge reads as this detection's edge now
+            assert float(ev.edge_now[k, 0]) > 50 and bool(person[k]) and not bool(ghost[k])
+
+
 def test_a_sure_ghost_is_set_aside_for_the_life_and_a_person_is_not(paper_detector, room):
     """Learnt with someone standing there and now empty, unchanged since the frame before: the one
     detection is a sure ghost, no longer a person (``valid``) but still the life's to judge (``strip``, a
