@@ -8,26 +8,26 @@ who stood through most of it (the floor they hid continues the floor around it).
 frame (:func:`live_step`, two jitted calls), after detection, with the frame's d^2 (the detector's trace):
 
 1. **Ghost evidence** of each detection (:func:`ghost_evidence`): is there an object's edge in the
-   *current* image at the sides of the person's run of lines? At each radius of the person where
-   the sample just inside an edge line has changed, the least d^2 between it and the samples a few
-   pixels outside that edge, in the current frame (``edge_now``) and in the background
-   (``edge_before``), each side averaged over its radii; a sample inside another person's explained
-   region is that person's, not measured for this one. A person (standing too) differs from the
-   floor beside them: hundreds. A ghost (the background still holds someone who has gone, or a piece
-   of furniture moved away) shows floor continuing the floor beside it, about 1, while the background
-   there had an edge. Chromaticity makes this hold under shadows and the floor's shading (under lights
-   of two colours, ``light_axis``, the detector's d^2 across the light: a lamp's pool is no edge). The
-   verdict (:func:`verdicts`) is per side: a ghost needs one side with no edge now and more before,
-   and no side with a person's edge (a ghost continues the floor on at least one side, whatever
-   adjoins the other). The caller says which detections are trusted people (their tracks walked
+   *current* image at the sides of the person's run of lines? At each radius of the person where the
+   sample just inside an edge line has changed, the least d^2 between it and the samples a few pixels
+   outside that edge, in the current frame (``edge_now``) and in the background (``edge_before``), each
+   side averaged over its radii; a sample inside another person's explained region (the one inside the
+   edge, or one outside it) is that person's, not measured for this one. A person (standing too) differs
+   from the floor beside them: hundreds. A ghost (the background still holds someone who has gone, or a
+   piece of furniture moved away) shows floor continuing the floor beside it, about 1, while the
+   background there had an edge. Chromaticity makes this hold under shadows and the floor's shading
+   (under lights of two colours, ``light_axis``, the detector's d^2 across the light: a lamp's pool is
+   no edge). The verdict (:func:`verdicts`) is per side: a ghost needs one side with no edge now and
+   more before, and no side with a person's edge (a ghost continues the floor on at least one side,
+   whatever adjoins the other). The caller says which detections are trusted people (their tracks walked
    in, or have shown a person's edge for a while: :data:`runtime.realtime.perception.PERSON_SEEN_S`):
    those are ghosts only with both signs (no edge now, an edge :data:`GHOST_RATIO` times stronger
-   before); the others with any more edge before than now. A faint edge now and less
-   before (a person of nearly the floor's colour) is no verdict: neither a ghost's vote nor a
-   person's. A lamp of another colour switching on a bare floor has about the same (no) edge in
-   both, and gets a ghost's vote in about every other frame.
-   A sure ghost (a trusted detection's verdict) is set aside before anything reads the detections
-   (:func:`set_aside_ghosts`, in the perception step): not a person, still judged and repaired here.
+   before); the others with any more edge before than now. A faint edge now and less before (a person of
+   nearly the floor's colour) is no verdict: neither a ghost's vote nor a person's. A lamp of another
+   colour switching on a bare floor has about the same (no) edge in both, and gets a ghost's vote in
+   about every other frame. A sure ghost (a trusted detection's verdict) is set aside before anything
+   reads the detections (:func:`set_aside_ghosts`, in the perception step): not a person, still judged
+   and repaired here.
 2. **Repair**: a sample that has changed, stayed unchanged from frame to frame (still) for
    ``still_frames`` and gathered ``ghost_frames`` votes of a ghost is re-learnt from the current frame
    (its variance factor 1: one frame's estimate). The votes are counted while the sample stays
