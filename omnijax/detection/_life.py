@@ -107,6 +107,11 @@ FAINT = 1.0
 #: trusted ghost was judged one in 6 of its 150 frames (standing_start 9253, a walker's body re-learnt
 #: as it left the spot it stood on through the learning).
 WIDE_NONE = 2.0
+#: ... and only where that edge before is WIDE_RATIO times the edge now or more: a trusted walker dressed
+#: like the floor passing a strong edge of the background showed 5.6-9 now against 67-133 before (12-16
+#: times) and was judged a ghost, its body re-learnt for 90 frames (demo three_people 9281); the ghost of
+#: standing_start 9253 showed 5-10 against 800 (80 times and more).
+WIDE_RATIO = 32.0
 #: Ghost evidence: the sample inside an edge line lies INNER_PX inside it; the samples outside it
 #: FLANK_PX pixels out.
 INNER_PX, FLANK_PX = 1.5, (3.0, 5.0, 7.0)
@@ -165,7 +170,8 @@ def verdicts(ev: Evidence, trusted: Bool[Array, " K"], edge, faint: Bool[Array, 
     like a person's edge on the side it moved to (three_people 9239: 135 frames, trusted as a person
     after 36)."""
     ratio = jnp.where(trusted, GHOST_RATIO, 1.0)[:, None]
-    none_now = ev.edge_now < jnp.where(ev.edge_before >= ASIDE_BEFORE, WIDE_NONE * edge, edge)
+    wide = (ev.edge_before >= ASIDE_BEFORE) & (ev.edge_before > WIDE_RATIO * ev.edge_now)
+    none_now = ev.edge_now < jnp.where(wide, WIDE_NONE * edge, edge)
     ghost_side = none_now & (ev.edge_before > ratio * ev.edge_now)
     person = jnp.any((ev.edge_now >= edge) & (ev.edge_now > GHOST_RATIO * ev.edge_before), axis=-1)
     if faint is not None:

@@ -439,18 +439,21 @@ def test_a_side_where_the_background_had_a_persons_edge_allows_a_little_edge_now
     frames its open side fell under ``ghost_edge``, 6 of 150. Against a person's edge in the background,
     up to twice ``ghost_edge`` is no edge now. A side of the floor's own texture (before under
     ASIDE_BEFORE) keeps the plain threshold, and a person's edge on the other side still vetoes (someone
-    standing at the edge of their own ghost)."""
+    standing at the edge of their own ghost). Only where the edge before is WIDE_RATIO times the edge now:
+    a trusted walker dressed like the floor passing a strong edge of the background (demo three_people
+    9281: 9.0 now against 132.7 before) is no ghost."""
     from omnijax.detection import Evidence
 
     ghost = ([28.7, 8.3], [584.8, 826.0])
     texture = ([28.7, 8.3], [60.0, 90.0])  # the background's edge a floor's, not a person's
     walker = ([310.0, 8.3], [12.0, 826.0])  # a person's edge now on the left: the right is their ghost
-    ev = Evidence(edge_now=jnp.array([ghost[0], texture[0], walker[0]]),
-                  edge_before=jnp.array([ghost[1], texture[1], walker[1]]),
-                  samples=jnp.array([[38.0, 39.0], [38.0, 39.0], [12.0, 4.0]]))
+    faint_walker = ([9.0, 21.1], [132.7, 10.6])
+    ev = Evidence(edge_now=jnp.array([ghost[0], texture[0], walker[0], faint_walker[0]]),
+                  edge_before=jnp.array([ghost[1], texture[1], walker[1], faint_walker[1]]),
+                  samples=jnp.array([[38.0, 39.0], [38.0, 39.0], [12.0, 4.0], [15.0, 22.0]]))
     for trusted in (False, True):
-        g, p = (np.asarray(v) for v in verdicts(ev, jnp.full(3, trusted), 6.0))
-        assert g.tolist() == [True, False, False] and p.tolist() == [False, False, True]
+        g, p = (np.asarray(v) for v in verdicts(ev, jnp.full(4, trusted), 6.0))
+        assert g.tolist() == [True, False, False, False] and p.tolist() == [False, False, True, False]
 
 
 def test_a_ghost_is_judged_without_another_persons_samples(paper_detector, room):
