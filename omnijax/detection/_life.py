@@ -157,8 +157,8 @@ def verdicts(ev: Evidence, trusted: Bool[Array, " K"], edge, faint: Bool[Array, 
     (``edge_now >= edge``) :data:`GHOST_RATIO` times what the background shows there (a static edge, a
     table's, is in both); a *ghost* when it has none now (``< edge``) and more in the background: for a
     trusted detection :data:`GHOST_RATIO` times more (both signs), for the others any more; where the
-    background's edge there is a person's (:data:`ASIDE_BEFORE` or more), "none now" is under
-    :data:`WIDE_NONE` x ``edge``. A detection
+    background's edge there is a person's (:data:`ASIDE_BEFORE` or more, :data:`WIDE_RATIO` times the edge
+    now), "none now" is under :data:`WIDE_NONE` x ``edge``. A detection
     is a ghost when a side shows one and no side shows a person (a ghost continues the floor on at least
     one side, whatever adjoins the other; someone standing against a table of their colour still has
     their edge on the open side). Neither (a faint edge now and less before) is no verdict.
