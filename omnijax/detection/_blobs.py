@@ -35,7 +35,10 @@ or one behind the other as the camera sees them, and the paper's estimate then f
      change starts outward of eq 12's foot (nothing inward of it shows) has the foot from the head's top
      and the prior's height, eq 12's extent filled by empty samples (``from_head``: a person shorter
      than the prior, legs that do not show, or legs behind furniture; the sigma carries the height's
-     spread, :data:`EMPTY_INNER`; docs/detection.md, "Shorter than the prior").
+     spread, :data:`EMPTY_INNER`; docs/detection.md, "Shorter than the prior"), unless the frame's brightness
+     shows their head past the change's end (dark hair over a face the colour of what is behind it): the foot
+     then moves out to the hypothesis whose top reaches it, never past where the change starts
+     (:data:`SHADE_LOG`; docs/detection.md, "A head the colour of what is behind it").
 3. Two people's feet are at least a shoulder width apart; two detections whose feet are closer
    than :data:`MERGE_M` on the floor are one person's fragments and the weaker goes, and a run of
    fewer than :data:`MIN_RUN_LINES` lines (or one found by the head alone narrower than
@@ -114,6 +117,25 @@ TALL_MIN = 6
 #: not one or two: the body's round base over the window's lines makes a soft edge of a sample or two
 #: at eq 12's own foot (the edge TALL_EDGE allows for).
 EMPTY_INNER = 3
+#: The head beyond the change (:func:`_off_prior_height`, with the frame's ``shade``): a head whose skin and
+#: hair have the chromaticity of what lies behind them (a brown floor or cupboard, dark hair whose
+#: chromaticity is noise) ends the person's change at the neck, and eq 12 puts the foot where a person of
+#: the prior's height with that top would stand, 0.4-0.6 m inward at 3 m (six_people 9281's person 2, demo
+#: target on no person). Their hair still shows in brightness: a sample whose log brightness against the
+#: background's differs from its line's median (the light's level) by SHADE_LOG or more (2.7 times darker
+#: or brighter: dark hair at 0.1-0.3 of a floor counts, a person's shadow, about 0.5, and brown hair do
+#: not) on two of the centre line and its neighbours, in a run that starts within the model's neck and
+#: head past the change's end (a face of the background's colour between), is the head; where that run
+#: ends HEAD_MIN samples or more past eq 12's top, the foot moves out to the hypothesis
+#: whose top reaches it, never past where the change starts (the legs); not at all where that hypothesis
+#: lies more than HEAD_MIN past the change's start (what shows dark beyond is not this person's head), nor
+#: without such a run (a change that runs on past eq 12's top is someone farther out on the line of sight:
+#: lamps_switching 9271, where the first form moved the foot onto them). The
+#: background's life keeps reading the person's sides over eq 12's extent (``People.foot``): reading them
+#: over the moved one let a ghost of the learning last 290 frames (standing_start 9271). Beyond the paper;
+#: docs/detection.md, "A head the colour of what is behind it".
+SHADE_LOG = 1.0
+HEAD_MIN = 3
 #: Feet closer than this on the floor (m) are one person's (two people's are a shoulder width apart).
 MERGE_M = 0.45
 #: Fewest lines in a person's run: a body spans at least 5 lines (2 asin(rho / R) at the room's far
@@ -146,7 +168,9 @@ class People(eqx.Module):
     end radius), the region the background's life repairs when it is a ghost; ``head_only``: found
     by their neck and head alone (the whole person's contrast under the gate: dressed like the floor);
     ``from_head``: the foot from the head's top and the prior's height, nothing changed over the inner
-    end of eq 12's extent (:data:`EMPTY_INNER`).
+    end of eq 12's extent (:data:`EMPTY_INNER`); ``foot``: the hypothesis the foot is read from where it
+    is not ``i``'s (a head seen in brightness past the change, :data:`SHADE_LOG`; None: ``i``'s): ``i``
+    stays the extent the background's life reads the person's sides over.
     """
 
     valid: Bool[Array, " K"]
@@ -161,6 +185,7 @@ class People(eqx.Module):
     explained: Int[Array, "K 4"]
     head_only: Bool[Array, " K"]
     from_head: Bool[Array, " K"]
+    foot: Int[Array, " K"] | None = None
 
 
 def prefix_sums(x: Float[Array, "n ..."]) -> Float[Array, "n_plus_1 ..."]:
@@ -254,10 +279,12 @@ def _band_lines(polar: PolarIndex) -> int:
 
 
 def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T R"], candidate: Bool[Array, " T"],
-                window: Float[Array, " R"], c_min, dof_per_sample: int, sigma_H_p, max_people: int) -> People:
+                window: Float[Array, " R"], c_min, dof_per_sample: int, sigma_H_p, max_people: int,
+                shade: Float[Array, "T R"] | None = None) -> People:
     """Step 5-6 per person (see the module docstring) on the frame's polar d^2 (``ok`` 1 where a
     sample counts), among the ``candidate`` lines (the psi1 sectors); ``window`` the psi2
-    significance threshold per radius.
+    significance threshold per radius; ``shade`` the frame's log brightness against the background's
+    at the samples (None: no head is sought beyond the change, :data:`SHADE_LOG`).
 
     Each line's figures (its best foot, excess, contrast, support) depend on the samples within a
     window's reach of it, so after a person is explained only the lines round what it explained
@@ -371,11 +398,11 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     people = jax.tree.map(lambda v: jnp.zeros((max_people, *v.shape), v.dtype).at[0].set(v), rec)
     state = (jnp.asarray(1), d2, explained, fig, people, rec["valid"])
     people = jax.lax.while_loop(lambda s: (s[0] < max_people) & s[5], body, state)[4]
-    return _off_prior_height(polar, d2_frame, ok, People(**people), dps, dps + TALL_CHARGE * c_min, sigma_H_p)
+    return _off_prior_height(polar, d2_frame, ok, People(**people), dps, dps + TALL_CHARGE * c_min, sigma_H_p, shade)
 
 
 def _off_prior_height(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T R"], people: People, dps,
-                      level, sigma_H_p) -> People:
+                      level, sigma_H_p, shade: Float[Array, "T R"] | None = None) -> People:
     """Each person's foot moved inward from eq 12's to where their change starts on their centre line, for
     someone taller than the prior (:data:`TALL_CHARGE` and after), with every other person's explained
     samples at the background's mean ``dps`` (someone nearer on the same azimuth is not this person's
@@ -409,12 +436,36 @@ def _off_prior_height(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Arra
         start = jnp.min(jnp.where((r_idx >= people.i[k]) & (q > 0.0), r_idx, R))  # where the change starts
         # not under the camera (that foot is anywhere in the blind disc, a bound of its own)
         empty = people.valid[k] & ~move & (people.i[k] > polar.hyp_first) & (start >= people.i[k] + EMPTY_INNER)
-        return jnp.where(move, j, people.i[k]), empty
+        i = jnp.where(move, j, people.i[k])
+        if shade is None:
+            return i, empty, i
+        # the head beyond the change's end, seen in brightness (SHADE_LOG): the run of such samples from there
+        mid = rows[reach - 1:reach + 2]
+        seen = (ok[mid] > 0) & ~hidden[reach - 1:reach + 2]
+        s = shade[mid]
+        light = jnp.nanmedian(jnp.where(seen, s, jnp.nan), axis=1, keepdims=True)  # the light's level a line
+        g = jnp.sum(seen & (jnp.abs(s - light) >= SHADE_LOG), 0) >= 2
+        g = g | (jnp.roll(g, 1) & jnp.roll(g, -1))  # a sample's gap
+        end = jnp.min(jnp.where((r_idx > start) & (q <= 0.0), r_idx, R)) - 1  # the change's last sample
+        # the hair may start a neck and a face past it (skin of the colour behind): within the model's neck and head
+        first = jnp.min(jnp.where((r_idx > end) & g, r_idx, R))
+        near = (first < R) & (first <= end + 1 + out[people.i[k]] - polar.hyp_head[people.i[k]])
+        top = jnp.where(near, jnp.min(jnp.where((r_idx > first) & ~g, r_idx, R)), end + 1)  # past the head seen
+        reach_top = (out >= top) & polar.hyp_ok & (r_idx >= people.i[k])
+        j_top = jnp.argmax(reach_top)  # the first hypothesis whose top reaches the head's
+        # a head whose prior-height foot lies past where the change starts (more than HEAD_MIN) is not this
+        # person's: something dark beyond them (someone farther out on the line of sight)
+        out_move = (empty & near & jnp.any(reach_top) & (top >= out[people.i[k]] + HEAD_MIN)
+                    & (j_top <= start + HEAD_MIN) & (j_top > people.i[k]))
+        j_top = jnp.minimum(j_top, start)
+        # a foot at the change's start is seen, not the head's
+        return i, empty & ~(out_move & (j_top >= start)), jnp.where(out_move, j_top, i)
 
-    i, from_head = jax.vmap(one)(jnp.arange(K))
+    i, from_head, foot = jax.vmap(one)(jnp.arange(K))
     explained = e.at[:, 2].set(jnp.minimum(e[:, 2], jnp.maximum(i - MARGIN_R, 0)))
-    return eqx.tree_at(lambda p: (p.i, p.explained, p.from_head), people,
-                       (i.astype(people.i.dtype), explained.astype(e.dtype), from_head))
+    return eqx.tree_at(lambda p: (p.i, p.explained, p.from_head, p.foot), people,
+                       (i.astype(people.i.dtype), explained.astype(e.dtype), from_head, foot.astype(people.i.dtype)),
+                       is_leaf=lambda x: x is None)
 
 
 def _distances(xy: Float[Array, "K 2"]) -> Float[Array, "K K"]:

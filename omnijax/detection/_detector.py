@@ -118,7 +118,9 @@ class Detections(eqx.Module):
     adds as it is (:func:`omnijax.aiming.detection_sigmas`);
     ``contrast`` is the non-centrality per sample measured on the profile (over the samples no
     stronger person explained); ``r_in``/``r_out`` (px) the person's radial extent (the foot
-    hypothesis's); ``theta_l``/``theta_r`` the run's edges; ``peak`` the profile's d^2 excess;
+    hypothesis's, or eq 12's where the foot moved out to a head seen in brightness alone,
+    :data:`~omnijax.detection._blobs.SHADE_LOG`: the background's life reads the sides over it);
+    ``theta_l``/``theta_r`` the run's edges; ``peak`` the profile's d^2 excess;
     ``region`` the polar samples the person explained, (first line, last line, first radius
     index, end radius index), ``last`` may pass ``T - 1``: what the background's life re-learns
     when the person is a ghost. ``strip`` marks the runs that are not people's
@@ -279,8 +281,10 @@ def detections_of(detector: Detector, people: People, d2: Float[Array, "T R"]) -
     theta_f = wrap_2pi(people.centre * step)
     floor = lambda i: polar.hyp_R[i][:, None] * jnp.stack([jnp.cos(theta_f), jnp.sin(theta_f)], -1)
     i_own, has_own = own_feet(polar, d2, people)
+    foot = people.i if people.foot is None else people.foot
     two = parted(people.valid, floor(people.i), floor(i_own), has_own)
-    i = jnp.where(jnp.any(two, 1), i_own, people.i)
+    i = jnp.where(jnp.any(two, 1), i_own, foot)
+    i_extent = jnp.where(jnp.any(two, 1), i_own, people.i)  # what the background's life reads the sides over
     width = (people.last - people.first + 1) * step
     sigma_r, sigma_theta, bound_r, bound_theta = _foot_sigmas(detector, i, people.contrast, width, people.visible,
                                                               people.head_only | people.from_head)
@@ -292,19 +296,20 @@ def detections_of(detector: Detector, people: People, d2: Float[Array, "T R"]) -
     return Detections(
         valid=valid, r_f=polar.hyp_r_f[i], theta_f=theta_f, sigma_r_f=sigma_r, sigma_theta_f=sigma_theta,
         bound_r_f=bound_r, bound_theta_f=bound_theta,
-        contrast=people.contrast, r_in=polar.radii[i], r_out=polar.radii[0] + polar.hyp_out[i],
+        contrast=people.contrast, r_in=polar.radii[i_extent], r_out=polar.radii[0] + polar.hyp_out[i_extent],
         theta_l=wrap_2pi(people.first * step), theta_r=wrap_2pi(people.last * step), peak=people.excess,
         region=people.explained, strip=strip,
     )
 
 
-def locate_people(detector: Detector, d2: Float[Array, "T R"], sectors) -> Detections:
+def locate_people(detector: Detector, d2: Float[Array, "T R"], sectors, shade: Array | None = None) -> Detections:
     """Steps 5-6 in the psi1 ``sectors`` of a frame whose polar d^2 is ``d2``: its people
-    (:func:`~omnijax.detection.find_people`) as :class:`Detections`."""
+    (:func:`~omnijax.detection.find_people`) as :class:`Detections`; ``shade`` (:func:`shade_of`) lets a
+    head that shows in brightness alone place the foot (:data:`~omnijax.detection._blobs.SHADE_LOG`)."""
     polar, th = detector.polar, detector.thresholds
     ok = polar.line_ok.astype(d2.dtype)
     people = find_people(polar, d2, ok, sector_lines(sectors, polar.n_theta), th.window, th.c_min,
-                         detector.dof_per_sample, detector.sigma_H_p, detector.max_people)
+                         detector.dof_per_sample, detector.sigma_H_p, detector.max_people, shade)
     return detections_of(detector, people, d2)
 
 
@@ -315,4 +320,12 @@ def detect(detector: Detector, frame: UInt8[Array, "H W 3"],
     cur = polar_frame(detector, frame)
     d2 = _change_of(detector, cur, lines)
     M = d2.sum(-1)
-    return locate_people(detector, d2, find_sectors(detector, M)), DetectionTrace(M=M, d2=d2, cur=cur)
+    dets = locate_people(detector, d2, find_sectors(detector, M), shade_of(cur, lines))
+    return dets, DetectionTrace(M=M, d2=d2, cur=cur)
+
+
+def shade_of(cur: Float[Array, "T R 3"], lines: LineBackground) -> Float[Array, "T R"]:
+    """The log of the frame's brightness (the sum of its channels) over the background's at the polar
+    samples: what the chromaticity leaves out, read only where a person's change ends short of their
+    head (:data:`~omnijax.detection._blobs.SHADE_LOG`)."""
+    return jnp.log((cur.sum(-1) + 1.0) / (lines.mean.sum(-1) + 1.0))

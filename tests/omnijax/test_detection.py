@@ -454,6 +454,47 @@ def test_a_foot_placed_by_the_head_carries_the_height_prior_in_its_sigma(paper_d
     assert bound == pytest.approx(height(foot), rel=0.05)
 
 
+def test_a_head_the_colour_of_what_is_behind_it_places_the_foot_by_its_hair(paper_detector):
+    """On tables of d^2 and of brightness: six_people 9281's person 2 (1.754 m) standing 3.2 m out in
+    front of a brown cupboard, their skin and hair of its chromaticity: their change ends at the
+    shoulders, and eq 12 put the foot where a person of the prior's height with that top would stand
+    (12 px, 0.5 m inward: a miss, a false alarm, and the demo's PTZ on no person). Their dark hair (0.1-0.3
+    of the cupboard's brightness) shows past a face that does not: the foot moves out to the hypothesis
+    whose top reaches the hair's end. A darkening like a shadow's (half the light) is no head, nor is a
+    dark run whose end no person standing where the change starts could reach (someone beyond), and
+    a person whose head shows in the chromaticity keeps eq 12's foot whatever the brightness says."""
+    from omnijax.detection._detector import find_sectors, locate_people
+
+    det = paper_detector
+    polar = det.polar
+    i = int(np.argmin(np.abs(np.asarray(polar.hyp_R) - 3.2)))
+    out, head, r_f = (np.asarray(v) for v in (polar.hyp_out, polar.hyp_head, polar.hyp_r_f))
+    ok = np.asarray(polar.line_ok, np.float32)
+    c_min = float(det.thresholds.c_min)
+    step = 2 * np.pi / polar.n_theta
+    half = int(np.round(0.5 * float(polar.hyp_width[i]) / step))
+    hair = slice(int(out[i]) - (int(out[i]) - int(head[i])) // 2, int(out[i]))  # the crown: the top half
+
+    def foot(body_end, darkening, dark=hair):
+        d2 = 2.0 * ok
+        d2[100 - half:100 + half + 1, i:body_end] += 8.0 * c_min
+        shade = np.zeros_like(d2)
+        shade[100 - 2:100 + 3, dark] = np.log(darkening)  # a head's width of lines
+        d2 = jnp.asarray(d2 * ok)
+        d = locate_people(det, d2, find_sectors(det, d2.sum(-1)), jnp.asarray(shade))
+        ks = list(np.flatnonzero(np.asarray(d.valid)))
+        assert len(ks) == 1
+        return float(d.r_f[ks[0]])
+
+    truth = float(r_f[i])
+    assert foot(int(head[i]), 1.0) < truth - 5.0  # no head in either measure: eq 12's tie, inward
+    assert foot(int(head[i]), 0.2) == pytest.approx(truth, abs=1.5)  # dark hair past the face: the foot out
+    assert foot(int(head[i]), 0.5) < truth - 5.0  # a shadow's darkening is no head
+    assert foot(int(out[i]), 0.2) == pytest.approx(truth, abs=1.5)  # the head shows: eq 12's foot, as it was
+    # dark on past where this person's head can end (someone farther out on the line): not their head
+    assert foot(int(head[i]), 0.2, slice(hair.start, int(out[i]) + 25)) < truth - 5.0
+
+
 def test_two_people_whose_images_overlap_in_azimuth_are_parted_not_merged(paper_detector):
     """stops_a_minute 9078's two standers on a table of d^2: one 1.25 m out, the other 1.81 m out and 8
     degrees aside, their images overlapping over most of their lines, found as the people stage found
