@@ -18,6 +18,8 @@ of the same size.
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -302,7 +304,7 @@ def detections_of(detector: Detector, people: People, d2: Float[Array, "T R"]) -
     )
 
 
-def locate_people(detector: Detector, d2: Float[Array, "T R"], sectors, shade: Array | None = None) -> Detections:
+def locate_people(detector: Detector, d2: Float[Array, "T R"], sectors, shade=None) -> Detections:
     """Steps 5-6 in the psi1 ``sectors`` of a frame whose polar d^2 is ``d2``: its people
     (:func:`~omnijax.detection.find_people`) as :class:`Detections`; ``shade`` (:func:`shade_of`) lets a
     head that shows in brightness alone place the foot (:data:`~omnijax.detection._blobs.SHADE_LOG`)."""
@@ -320,12 +322,12 @@ def detect(detector: Detector, frame: UInt8[Array, "H W 3"],
     cur = polar_frame(detector, frame)
     d2 = _change_of(detector, cur, lines)
     M = d2.sum(-1)
-    dets = locate_people(detector, d2, find_sectors(detector, M), shade_of(cur, lines))
+    dets = locate_people(detector, d2, find_sectors(detector, M), functools.partial(shade_of, cur, lines))
     return dets, DetectionTrace(M=M, d2=d2, cur=cur)
 
 
-def shade_of(cur: Float[Array, "T R 3"], lines: LineBackground) -> Float[Array, "T R"]:
+def shade_of(cur: Float[Array, "T R 3"], lines: LineBackground, rows: Int[Array, " n"]) -> Float[Array, "n R"]:
     """The log of the frame's brightness (the sum of its channels) over the background's at the polar
-    samples: what the chromaticity leaves out, read only where a person's change ends short of their
-    head (:data:`~omnijax.detection._blobs.SHADE_LOG`)."""
-    return jnp.log((cur.sum(-1) + 1.0) / (lines.mean.sum(-1) + 1.0))
+    samples of lines ``rows``: what the chromaticity leaves out, read only where a person's change ends
+    short of their head (:data:`~omnijax.detection._blobs.SHADE_LOG`), a few lines a person."""
+    return jnp.log((cur[rows].sum(-1) + 1.0) / (lines.mean[rows].sum(-1) + 1.0))

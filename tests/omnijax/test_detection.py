@@ -481,7 +481,7 @@ def test_a_head_the_colour_of_what_is_behind_it_places_the_foot_by_its_hair(pape
         shade = np.zeros_like(d2)
         shade[100 - 2:100 + 3, dark] = np.log(darkening)  # a head's width of lines
         d2 = jnp.asarray(d2 * ok)
-        d = locate_people(det, d2, find_sectors(det, d2.sum(-1)), jnp.asarray(shade))
+        d = locate_people(det, d2, find_sectors(det, d2.sum(-1)), lambda rows: jnp.asarray(shade)[rows])
         ks = list(np.flatnonzero(np.asarray(d.valid)))
         assert len(ks) == 1
         return float(d.r_f[ks[0]])
