@@ -123,7 +123,7 @@ EMPTY_INNER = 3
 #: chromaticity is noise) ends the person's change at the neck, and eq 12 puts the foot where a person of
 #: the prior's height with that top would stand, 0.4-0.6 m inward at 3 m (six_people 9281's person 2, demo
 #: target on no person). Their hair still shows in brightness: a sample whose log brightness against the
-#: background's differs from its line's median (the light's level) by SHADE_LOG or more (2.7 times darker
+#: background's differs from its line's level (the mean off the person) by SHADE_LOG or more (2.7 times darker
 #: or brighter: dark hair at 0.1-0.3 of a floor counts, a person's shadow, about 0.5, and brown hair do
 #: not) on two of the centre line and its neighbours, in a run that starts within the model's neck and
 #: head past the change's end (a face of the background's colour between), is the head; where that run
