@@ -114,8 +114,7 @@ TALL_MIN = 6
 #: 9211: a 1.80-m walker whose lower legs a table hid, thrown 0.5-0.6 m outward): the change's start is
 #: sharp in both, the background's own edges do not part them, and the prior's odds of a 2.7-sigma
 #: person are 1 in 40 of one at the mean; so the foot stays, and its sigma carries the prior height's
-#: spread (docs/detection.md, "Shorter than the prior": the move tried and not kept), unless the head shows
-#: in neither measure (HEAD_STRONG, SHADE_LOG: then the change is the body's alone). Three samples,
+#: spread (docs/detection.md, "Shorter than the prior": the move tried and not kept). Three samples,
 #: not one or two: the body's round base over the window's lines makes a soft edge of a sample or two
 #: at eq 12's own foot (the edge TALL_EDGE allows for).
 EMPTY_INNER = 3
@@ -138,19 +137,8 @@ EMPTY_INNER = 3
 #: docs/detection.md, "A head the colour of what is behind it".
 SHADE_LOG = 1.0
 HEAD_MIN = 3
-#: No head past the shoulders (:func:`_off_prior_height`): a head is under half the shoulders' width (0.2 m
-#: against 0.45), so for a ``from_head`` person with no head in brightness, where the strong change (a
-#: sample's d^2 dps + HEAD_STRONG c_min or more: chi-square(2) passes 18 once in 8,000 samples, a person's
-#: is 100-1,000) on the person's run of lines runs no narrower than two thirds of its widest past its last
-#: wide radius for a third of a head's length (the model's at the change's start), no head shows: the
-#: change ends at the shoulders (a head of the floor's or the furniture's chromaticity, brown hair that
-#: is not dark enough for SHADE_LOG), and the foot is where the change starts, if no other detection's
-#: region lies within EMPTY_INNER samples inward of that start (a nearer person hid where it begins).
-#: standing_start 9293's person 0 (skin 0.35, 0.22, 0.15, hair 0.3, 0.2, 0.1; 3.1 m out): eq 12's tie put
-#: the foot 13 px (0.6 m) inward for 85 frames. Legs behind furniture with the head showing keep eq 12's
-#: foot (the head is narrow); so does a change that ends short of the neck of a person standing where it
-#: starts (legs of the floor's colour: the change starts at the waist, three_people 9312). Beyond the
-#: paper; docs/detection.md, "No head past the shoulders".
+#: A sample's d^2 that shows a head in the chromaticity (:func:`_off_prior_height`): dps + HEAD_STRONG c_min,
+#: beyond the sensor's noise (chi-square(2) exceeds 18 once in 8,000 samples) and under a person's (100-1,000).
 HEAD_STRONG = 4.0
 #: Feet closer than this on the floor (m) are one person's (two people's are a shoulder width apart).
 MERGE_M = 0.45
@@ -481,10 +469,16 @@ def _off_prior_height(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Arra
         out_move = (empty & near & jnp.any(reach_top) & (top >= o + HEAD_MIN)
                     & (j_top <= start + HEAD_MIN) & (j_top > people.i[k]))
         j_top = jnp.minimum(j_top, start)
-        # where the change seems to start is this person's start when no other detection's region lies just inward
+        # no head past the change, but the change itself runs past eq 12's top: the whole change lies outward
+        # of eq 12's extent; it is one person standing where it starts when its length is one person's there
+        # and its start is seen (no other detection's region just inward of it)
         c = reach
+        tall_at = jnp.ceil(TALL_SIGMAS * sigma_H_p * polar.hyp_dout_dH[jnp.minimum(start, R - 1)])
+        one_long = end <= out[jnp.minimum(start, R - 1)] + tall_at
         before = (r_idx < start) & (r_idx >= start - EMPTY_INNER)
         start_seen = ~jnp.any(before & hidden[c])
+        whole_out = (empty & ~near & (start < R) & (end >= o + HEAD_MIN) & one_long & start_seen
+                     & polar.hyp_ok[jnp.minimum(start, R - 1)])
         # no head in the chromaticity past the body: a head is under half the shoulders' width, so where the
         # strong change (HEAD_STRONG) runs on no narrower than two thirds of its widest past its last wide
         # radius for a third of a head's length, the head shows and eq 12's top is the head's; where it does
@@ -498,12 +492,11 @@ def _off_prior_height(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Arra
         wide_end = jnp.max(jnp.where(span & (3 * width >= 2 * widest), r_idx, -1))
         head_len = out[i_s] - polar.hyp_head[i_s]
         narrow = jnp.sum((r_idx > wide_end) & (r_idx <= wide_end + head_len) & (width >= 1))
-        # and the change is a whole body's: it reaches the neck of a person standing at its start (a change that
-        # starts at the waist, legs of the floor's colour, ends short of that neck)
         headless = (empty & ~out_move & (start < R) & (widest >= HEAD_MIN) & (3 * narrow < head_len) & start_seen
-                    & polar.hyp_ok[i_s] & (end >= polar.hyp_head[i_s] - HEAD_MIN))
-        out_move = out_move | headless
-        j_top = jnp.where(headless, start, j_top)
+                    & polar.hyp_ok[i_s])
+        whole_out = whole_out | headless
+        out_move = out_move | whole_out
+        j_top = jnp.where(whole_out, start, j_top)
         # a foot at the change's start is seen, not the head's
         return i, empty & ~(out_move & (j_top >= start)), jnp.where(out_move, j_top, i)
 
