@@ -137,9 +137,6 @@ EMPTY_INNER = 3
 #: docs/detection.md, "A head the colour of what is behind it".
 SHADE_LOG = 1.0
 HEAD_MIN = 3
-#: A sample's d^2 that shows a head in the chromaticity (:func:`_off_prior_height`): dps + HEAD_STRONG c_min,
-#: beyond the sensor's noise (chi-square(2) exceeds 18 once in 8,000 samples) and under a person's (100-1,000).
-HEAD_STRONG = 4.0
 #: Feet closer than this on the floor (m) are one person's (two people's are a shoulder width apart).
 MERGE_M = 0.45
 #: Fewest lines in a person's run: a body spans at least 5 lines (2 asin(rho / R) at the room's far
@@ -403,22 +400,20 @@ def find_people(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T 
     people = jax.tree.map(lambda v: jnp.zeros((max_people, *v.shape), v.dtype).at[0].set(v), rec)
     state = (jnp.asarray(1), d2, explained, fig, people, rec["valid"])
     people = jax.lax.while_loop(lambda s: (s[0] < max_people) & s[5], body, state)[4]
-    return _off_prior_height(polar, d2_frame, ok, People(**people), dps, c_min, sigma_H_p, shade)
+    return _off_prior_height(polar, d2_frame, ok, People(**people), dps, dps + TALL_CHARGE * c_min, sigma_H_p, shade)
 
 
 def _off_prior_height(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Array, "T R"], people: People, dps,
-                      c_min, sigma_H_p, shade=None) -> People:
+                      level, sigma_H_p, shade=None) -> People:
     """Each person's foot moved inward from eq 12's to where their change starts on their centre line, for
     someone taller than the prior (:data:`TALL_CHARGE` and after), with every other person's explained
     samples at the background's mean ``dps`` (someone nearer on the same azimuth is not this person's
-    legs); a sample whose windowed change exceeds ``dps + TALL_CHARGE * c_min`` counts as the person's.
-    Their explained region (what the background's life repairs if they are a ghost) grows inward with the
-    foot. A person whose change starts :data:`EMPTY_INNER` or more samples outward of eq 12's foot is
-    marked ``from_head``: their foot is the head's top and the prior's height (shorter than the prior, or
-    legs that do not show), unless their head shows in neither measure (:data:`HEAD_STRONG`: the foot is
-    where the change starts) or in brightness alone (:data:`SHADE_LOG`). Beyond the paper."""
+    legs); ``level`` the change a sample that counts as the person's. Their explained region (what the
+    background's life repairs if they are a ghost) grows inward with the foot. A person whose change
+    starts :data:`EMPTY_INNER` or more samples outward of eq 12's foot is marked ``from_head``: their foot
+    is the head's top and the prior's height (shorter than the prior, or legs that do not show). Beyond
+    the paper."""
     T, R = d2.shape
-    level = dps + TALL_CHARGE * c_min
     reach = _wrap(T, polar.window_reach)
     out, r_idx = polar.hyp_out, jnp.arange(R)
     K = people.valid.shape[0]
@@ -469,34 +464,6 @@ def _off_prior_height(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Arra
         out_move = (empty & near & jnp.any(reach_top) & (top >= o + HEAD_MIN)
                     & (j_top <= start + HEAD_MIN) & (j_top > people.i[k]))
         j_top = jnp.minimum(j_top, start)
-        # no head past the change, but the change itself runs past eq 12's top: the whole change lies outward
-        # of eq 12's extent; it is one person standing where it starts when its length is one person's there
-        # and its start is seen (no other detection's region just inward of it)
-        c = reach
-        tall_at = jnp.ceil(TALL_SIGMAS * sigma_H_p * polar.hyp_dout_dH[jnp.minimum(start, R - 1)])
-        one_long = end <= out[jnp.minimum(start, R - 1)] + tall_at
-        before = (r_idx < start) & (r_idx >= start - EMPTY_INNER)
-        start_seen = ~jnp.any(before & hidden[c])
-        whole_out = (empty & ~near & (start < R) & (end >= o + HEAD_MIN) & one_long & start_seen
-                     & polar.hyp_ok[jnp.minimum(start, R - 1)])
-        # no head in the chromaticity past the body: a head is under half the shoulders' width, so where the
-        # strong change (HEAD_STRONG) runs on no narrower than two thirds of its widest past its last wide
-        # radius for a third of a head's length, the head shows and eq 12's top is the head's; where it does
-        # not, the change ends at the shoulders (a head the colour of what is behind it, or past the image's
-        # rim) and the person stands where their change starts, seen
-        i_s = jnp.minimum(start, R - 1)
-        own = ((rows - people.first[k]) % T) <= (people.last[k] - people.first[k])
-        width = jnp.sum(own[:, None] & ~hidden & (d2[rows] >= dps + HEAD_STRONG * c_min), 0)
-        span = (r_idx >= start) & (r_idx <= end)
-        widest = jnp.max(jnp.where(span, width, 0))
-        wide_end = jnp.max(jnp.where(span & (3 * width >= 2 * widest), r_idx, -1))
-        head_len = out[i_s] - polar.hyp_head[i_s]
-        narrow = jnp.sum((r_idx > wide_end) & (r_idx <= wide_end + head_len) & (width >= 1))
-        headless = (empty & ~out_move & (start < R) & (widest >= HEAD_MIN) & (3 * narrow < head_len) & start_seen
-                    & polar.hyp_ok[i_s])
-        whole_out = whole_out | headless
-        out_move = out_move | whole_out
-        j_top = jnp.where(whole_out, start, j_top)
         # a foot at the change's start is seen, not the head's
         return i, empty & ~(out_move & (j_top >= start)), jnp.where(out_move, j_top, i)
 
