@@ -23,11 +23,14 @@ frame (:func:`live_step`, two jitted calls), after detection, with the frame's d
    in, or have shown a person's edge for a while: :data:`runtime.realtime.perception.PERSON_SEEN_S`):
    those are ghosts only with both signs (no edge now, an edge :data:`GHOST_RATIO` times stronger
    before); the others with any more edge before than now. A faint edge now and less before (a person of
-   nearly the floor's colour) is no verdict: neither a ghost's vote nor a person's. A lamp of another
-   colour switching on a bare floor has about the same (no) edge in both, and gets a ghost's vote in
-   about every other frame. A sure ghost (a trusted detection's verdict) is set aside before anything
-   reads the detections (:func:`set_aside_ghosts`, in the perception step): not a person, still judged
-   and repaired here.
+   nearly the floor's colour) is no verdict: neither a ghost's vote nor a person's. At a radius where the
+   background is too dark to show the edge the frame shows (eq 5: a dark sample's chromaticity is
+   noise), the person's test takes the edge now to have been there before (``Evidence.person_before``): a
+   ghost of black shoes against a table showed "no edge" before beside the table, and the table's edge
+   now looked new. A lamp of another colour switching on a bare floor has about the same (no) edge in
+   both, and gets a ghost's vote in about every other frame. A sure ghost (a trusted detection's
+   verdict) is set aside before anything reads the detections (:func:`set_aside_ghosts`, in the
+   perception step): not a person, still judged and repaired here.
 2. **Repair**: a sample that has changed, stayed unchanged from frame to frame (still) for
    ``still_frames`` and gathered ``ghost_frames`` votes of a ghost is re-learnt from the current frame
    (its variance factor 1: one frame's estimate). The votes are counted while the sample stays
@@ -144,11 +147,15 @@ def start_life(lines: LineBackground) -> Life:
 
 class Evidence(eqx.Module):
     """Per detection and side (left, right): the edge now and in the background (least d^2, averaged
-    over the side's radii; ``inf`` where no changed sample was measured there), and the radii measured."""
+    over the side's radii; ``inf`` where no changed sample was measured there), and the radii measured.
+    ``person_before``: the edge before as a person's edge is judged against it (:func:`verdicts`): at a
+    radius where the background is too dark to show the edge the frame shows, the edge now
+    (:func:`ghost_evidence`; None: ``edge_before``)."""
 
     edge_now: Float[Array, "K 2"]
     edge_before: Float[Array, "K 2"]
     samples: Float[Array, "K 2"]
+    person_before: Float[Array, "K 2"] | None = None
 
 
 def verdicts(ev: Evidence, trusted: Bool[Array, " K"], edge, faint: Bool[Array, " K"] | None = None
@@ -173,7 +180,8 @@ def verdicts(ev: Evidence, trusted: Bool[Array, " K"], edge, faint: Bool[Array, 
     wide = (ev.edge_before >= ASIDE_BEFORE) & (ev.edge_before > WIDE_RATIO * ev.edge_now)
     none_now = ev.edge_now < jnp.where(wide, WIDE_NONE * edge, edge)
     ghost_side = none_now & (ev.edge_before > ratio * ev.edge_now)
-    person = jnp.any((ev.edge_now >= edge) & (ev.edge_now > GHOST_RATIO * ev.edge_before), axis=-1)
+    before = ev.edge_before if ev.person_before is None else ev.person_before
+    person = jnp.any((ev.edge_now >= edge) & (ev.edge_now > GHOST_RATIO * before), axis=-1)
     if faint is not None:
         sure_side = (ev.edge_now < edge) & (ev.edge_before >= edge) & (ev.edge_before > GHOST_RATIO * ev.edge_now)
         person = person & ~(faint & jnp.any(sure_side, axis=-1))
@@ -232,14 +240,31 @@ def ghost_evidence(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBa
 
         now = least(cur, jnp.ones_like(lines.var_factor))
         before = least(lines.mean, lines.var_factor)
-        return now, before, changed[a, rr] & radial & ~_elsewhere(dets, a, rr, T)
+        measured = changed[a, rr] & radial & ~_elsewhere(dets, a, rr, T)
+        # eq 5: chromaticity's noise grows as the light falls, so the d^2 of a pair is as small as its darker
+        # sample is dark. Where the background's pair is more than sqrt(GHOST_RATIO) times darker than the
+        # frame's, an edge the frame shows would measure under GHOST_RATIO times less in the background (its
+        # very own): no new edge can be told there, and the person's test takes it for one that was there
+        # before. A ghost of someone's black shoes against a table (6-17 grey levels against 100) "had no
+        # edge" beside the table and was judged a person on the table's edge, kept all clip
+        # (lamps_switching 9311: 230 frames; standing_start 9311)
+        def darker(colours):
+            flanks = jnp.sum(jnp.where(flank_ok[..., None], colours[b, rb], 0.0), axis=(1, 3))
+            flanks = flanks / jnp.maximum(jnp.sum(flank_ok, axis=1), 1)
+            return jnp.minimum(jnp.sum(colours[a, rr], -1), flanks)
+
+        seen = darker(lines.mean) * jnp.sqrt(GHOST_RATIO) >= darker(cur)
+        return now, before, measured, jnp.where(seen, before, jnp.maximum(before, now))
 
     # each side on its own (see verdicts): taking the two sides radius by radius let a side against
     # furniture speak for the radii where only it was measured (three_people 8810: a ghost of the
     # learning kept all clip, edge now 30 from the table beside it, about 1 on its open side)
-    (now_l, before_l, n_l), (now_r, before_r, n_r) = _side_means(*side(first, -1)), _side_means(*side(last, 1))
+    sides = [side(first, -1), side(last, 1)]
+    (now_l, before_l, n_l), (now_r, before_r, n_r) = (_side_means(*s[:3]) for s in sides)
+    person_before = [_side_means(now, judged, measured)[1] for now, _, measured, judged in sides]
     return Evidence(edge_now=jnp.stack([now_l, now_r], -1), edge_before=jnp.stack([before_l, before_r], -1),
-                    samples=jnp.stack([n_l, n_r], -1).astype(jnp.float32))
+                    samples=jnp.stack([n_l, n_r], -1).astype(jnp.float32),
+                    person_before=jnp.stack(person_before, -1))
 
 
 def _elsewhere(dets: Detections, a: Array, rr: Array, T: int) -> Bool[Array, "K ..."]:

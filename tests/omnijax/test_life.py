@@ -410,6 +410,45 @@ def test_a_ghost_beside_furniture_is_still_a_ghost(paper_detector, room):
         assert bool(ghost[k]) and not bool(person[k])
 
 
+
+def test_a_dark_ghost_against_furniture_is_still_a_ghost(paper_detector, room):
+    """A ghost of someone whose left half was dressed in black (the background near black over those
+    lines) and whose left side adjoins a cupboard, now and in the background; the frame shows the floor.
+    In the background the black samples' chromaticity is noise (eq 5), so the cupboard's edge measures
+    nothing there: the edge now looked new, a person's, and the ghost was kept all clip (lamps_switching
+    9311: 6-17 grey levels against 100, 230 frames). Where the background is darker than the frame by more
+    than sqrt(GHOST_RATIO), the person's test takes the edge now for one that was there before: on the
+    left here, so the open side's ghost decides. Someone in dark clothes standing there now (the floor in
+    the background) keeps their person's edge (the frame the darker, every radius is read)."""
+    det = paper_detector
+    T = det.polar.n_theta
+    lines, dets, cur, mean, d2, k, first, last, r0, r1 = _a_ghost_in_polar(det, room)
+    radii = np.arange(r0, r1)[None]
+    left = (first + np.arange((last - first) // 2 + 1))[:, None] % T
+    beyond = (first - np.arange(1, 12))[:, None] % T
+    floor = mean[beyond, radii].reshape(-1, 3).mean(0)
+    mean[left, radii] = (8.0, 7.0, 7.0)
+    cur[beyond, radii] = mean[beyond, radii] = (40.0, 70.0, 160.0)
+    ev = ghost_evidence(det, jnp.asarray(cur), lines_from(jnp.asarray(mean), lines.var_factor, lines.sigma),
+                        jnp.asarray(d2), dets)
+    assert ev.edge_now[k, 0] > 50 and ev.edge_now[k, 0] > 4 * ev.edge_before[k, 0]  # the cupboard, "new"
+    assert ev.edge_now[k, 1] < 3 and ev.edge_before[k, 1] > 4 * ev.edge_now[k, 1]  # the open side: a ghost
+    assert ev.person_before[k, 0] >= ev.edge_now[k, 0]  # no radius where a new edge could be told
+    for trusted in (False, True):
+        ghost, person = verdicts(ev, jnp.full(dets.valid.shape, trusted), 6.0)
+        assert bool(ghost[k]) and not bool(person[k])
+    # dark clothes standing there now (three times darker than the floor), on the floor the background holds
+    run = (first + np.arange(last - first + 1))[:, None] % T
+    mean[run, radii] = floor
+    cur[run, radii] = (60.0, 25.0, 15.0)
+    ev = ghost_evidence(det, jnp.asarray(cur), lines_from(jnp.asarray(mean), lines.var_factor, lines.sigma),
+                        jnp.asarray(d2), dets)
+    assert np.allclose(ev.person_before[k], ev.edge_before[k])  # the frame is the darker: every radius is read
+    for trusted in (False, True):
+        ghost, person = verdicts(ev, jnp.full(dets.valid.shape, trusted), 6.0)
+        assert bool(person[k]) and not bool(ghost[k])
+
+
 def test_a_faint_detection_whose_edge_moved_sides_is_a_ghost():
     """An edge of the background displaced by a few lines (three_people 9239, the sides' figures measured
     there): the frame has on the left the edge the background has on the right, so the left looks like a
