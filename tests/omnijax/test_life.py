@@ -410,7 +410,6 @@ def test_a_ghost_beside_furniture_is_still_a_ghost(paper_detector, room):
         assert bool(ghost[k]) and not bool(person[k])
 
 
-
 def test_a_dark_ghost_against_furniture_is_still_a_ghost(paper_detector, room):
     """A ghost of someone whose left half was dressed in black (the background near black over those
     lines) and whose left side adjoins a cupboard, now and in the background; the frame shows the floor.
