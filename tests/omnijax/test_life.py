@@ -20,6 +20,10 @@ from tests.omnijax.test_detection import _noisy, _paint_person
 #: before it is repaired; what stays still ABSORB frames is absorbed.
 STILL, GHOST, ABSORB = 2, 5, 12
 
+#: The evidence as one compiled program (the loop has it inside its own): op by op, each test that read
+#: it took 5-20 s.
+_evidence = eqx.filter_jit(ghost_evidence)
+
 
 def _rates(adapt_rate=0.05, edge=6.0):
     f = lambda x: jnp.asarray(float(x))
@@ -354,7 +358,7 @@ def test_a_lamps_pool_of_another_colour_is_no_edge_under_the_light_axis(paper_de
                                       (cur, (50.0, np.inf), (50.0, np.inf))):
         pooled = jnp.asarray(np.clip(now * (1.0 + lamp) / 2.0, 0.0, 255.0))  # daylight and the lamp, halved
         for det, (lo, hi) in ((paper_detector, edge_paper), (two, edge_two)):
-            e = np.asarray(ghost_evidence(det, pooled, lines, jnp.asarray(d2), dets).edge_now[k])
+            e = np.asarray(_evidence(det, pooled, lines, jnp.asarray(d2), dets).edge_now[k])
             assert np.all((e >= lo) & (e < hi)), (det.light_axis, e)
 
 
@@ -388,7 +392,7 @@ def test_a_ghost_beside_furniture_is_still_a_ghost(paper_detector, room):
     other side continues the floor, and each side judged on its own says ghost (taking the sides radius
     by radius mixed the furniture's edge into the evidence: three_people 8810 kept such a ghost all
     clip)."""
-    from omnijax.detection import ghost_evidence, lines_from
+    from omnijax.detection import lines_from
 
     det = paper_detector
     T = det.polar.n_theta
@@ -401,7 +405,7 @@ def test_a_ghost_beside_furniture_is_still_a_ghost(paper_detector, room):
     cur[beyond, outer[None]] = (40.0, 70.0, 160.0)
     mean[beyond, outer[None]] = (40.0, 70.0, 160.0)
     lines = lines_from(jnp.asarray(mean), lines.var_factor, lines.sigma)
-    ev = ghost_evidence(det, jnp.asarray(cur), lines, jnp.asarray(d2), dets)
+    ev = _evidence(det, jnp.asarray(cur), lines, jnp.asarray(d2), dets)
     (now_l, now_r), (before_l, before_r) = np.asarray(ev.edge_now[k]), np.asarray(ev.edge_before[k])
     assert now_l < 3.0 and before_l > 50 * now_l  # the open side continues the floor
     assert now_r > 50 and before_r > 50  # the cupboard's edge, now and before
@@ -428,7 +432,7 @@ def test_a_dark_ghost_against_furniture_is_still_a_ghost(paper_detector, room):
     floor = mean[beyond, radii].reshape(-1, 3).mean(0)
     mean[left, radii] = (8.0, 7.0, 7.0)
     cur[beyond, radii] = mean[beyond, radii] = (40.0, 70.0, 160.0)
-    ev = ghost_evidence(det, jnp.asarray(cur), lines_from(jnp.asarray(mean), lines.var_factor, lines.sigma),
+    ev = _evidence(det, jnp.asarray(cur), lines_from(jnp.asarray(mean), lines.var_factor, lines.sigma),
                         jnp.asarray(d2), dets)
     assert ev.edge_now[k, 0] > 50 and ev.edge_now[k, 0] > 4 * ev.edge_before[k, 0]  # the cupboard, "new"
     assert ev.edge_now[k, 1] < 3 and ev.edge_before[k, 1] > 4 * ev.edge_now[k, 1]  # the open side: a ghost
@@ -440,7 +444,7 @@ def test_a_dark_ghost_against_furniture_is_still_a_ghost(paper_detector, room):
     run = (first + np.arange(last - first + 1))[:, None] % T
     mean[run, radii] = floor
     cur[run, radii] = (60.0, 25.0, 15.0)
-    ev = ghost_evidence(det, jnp.asarray(cur), lines_from(jnp.asarray(mean), lines.var_factor, lines.sigma),
+    ev = _evidence(det, jnp.asarray(cur), lines_from(jnp.asarray(mean), lines.var_factor, lines.sigma),
                         jnp.asarray(d2), dets)
     assert np.allclose(ev.person_before[k], ev.edge_before[k])  # the frame is the darker: every radius is read
     for trusted in (False, True):
@@ -502,7 +506,7 @@ def test_a_ghost_is_judged_without_another_persons_samples(paper_detector, room)
     region, the side has no samples and the open side says ghost."""
     import equinox as eqx
 
-    from omnijax.detection import ghost_evidence, lines_from
+    from omnijax.detection import lines_from
 
     det = paper_detector
     T = det.polar.n_theta
@@ -515,7 +519,7 @@ def test_a_ghost_is_judged_without_another_persons_samples(paper_detector, room)
     region = dets.region.at[j].set(jnp.array([first - 1, first + 5, r0, r1], dets.region.dtype))
     for theirs in (False, True):
         with_body = eqx.tree_at(lambda d: (d.valid, d.region), dets, (dets.valid.at[j].set(theirs), region))
-        ev = ghost_evidence(det, jnp.asarray(cur), lines, jnp.asarray(d2), with_body)
+        ev = _evidence(det, jnp.asarray(cur), lines, jnp.asarray(d2), with_body)
         ghost, person = verdicts(ev, jnp.zeros(dets.valid.shape, bool), 6.0)
         if theirs:  # the body is someone's: the left side is not measured, the open right side says ghost
             assert float(ev.samples[k, 0]) == 0 and bool(ghost[k]) and not bool(person[k])
@@ -532,7 +536,7 @@ def test_a_ghost_beside_someone_standing_does_not_take_their_body_for_its_edge(p
     (here not at all) and the open right side says ghost."""
     import equinox as eqx
 
-    from omnijax.detection import ghost_evidence, lines_from
+    from omnijax.detection import lines_from
 
     det = paper_detector
     T = det.polar.n_theta
@@ -545,7 +549,7 @@ def test_a_ghost_beside_someone_standing_does_not_take_their_body_for_its_edge(p
     region = dets.region.at[j].set(jnp.array([first - 12, first - 1, r0, r1], dets.region.dtype))
     for theirs in (False, True):
         with_stander = eqx.tree_at(lambda d: (d.valid, d.region), dets, (dets.valid.at[j].set(theirs), region))
-        ev = ghost_evidence(det, jnp.asarray(cur), lines, jnp.asarray(d2), with_stander)
+        ev = _evidence(det, jnp.asarray(cur), lines, jnp.asarray(d2), with_stander)
         ghost, person = verdicts(ev, jnp.zeros(dets.valid.shape, bool), 6.0)
         if theirs:  # the stander is someone's detection: the left side is not measured against them
             assert float(ev.samples[k, 0]) == 0 and bool(ghost[k]) and not bool(person[k])
@@ -575,7 +579,7 @@ def test_a_sure_ghost_is_set_aside_for_the_life_and_a_person_is_not(paper_detect
         assert int(np.asarray(after.valid).sum()) == (0 if ghost else 1)
         assert np.array_equal(np.asarray(life_candidates(after)), np.asarray(life_candidates(dets)))
         # the evidence it judged by goes on in the trace, for the life to read instead of computing it again
-        own = ghost_evidence(det, trace.cur, lines, trace.d2, dets)
+        own = _evidence(det, trace.cur, lines, trace.d2, dets)
         for got, want in zip(jax.tree.leaves(judged.evidence), jax.tree.leaves(own)):
             np.testing.assert_allclose(np.asarray(got), np.asarray(want), rtol=1e-6)
         assert trace.evidence is None and np.array_equal(np.asarray(trace.cur), np.asarray(polar(frame)))
@@ -609,7 +613,7 @@ def test_a_person_against_a_table_of_their_colour_is_no_ghost(paper_detector, ro
     """Someone standing against a table of their own colour: that side has no edge now and the table's
     edge in the background (a ghost's two signs, on that side); the open side has the person's edge,
     and a person's edge on any side vetoes the ghost."""
-    from omnijax.detection import ghost_evidence, lines_from
+    from omnijax.detection import lines_from
 
     rng, base, person, _ = room
     det = paper_detector
@@ -621,7 +625,7 @@ def test_a_person_against_a_table_of_their_colour_is_no_ghost(paper_detector, ro
     cur[beyond] = inside[None]
     mean[beyond] = inside[None]
     lines = lines_from(jnp.asarray(mean), lines.var_factor, lines.sigma)
-    ev = ghost_evidence(det, jnp.asarray(cur), lines, jnp.asarray(d2), dets)
+    ev = _evidence(det, jnp.asarray(cur), lines, jnp.asarray(d2), dets)
     (now_l, now_r), (before_l, before_r) = np.asarray(ev.edge_now[k]), np.asarray(ev.edge_before[k])
     assert now_r < 3.0 and before_r > 50 * now_r  # the table side looks like a ghost's
     assert now_l > 50 and before_l < 3.0  # the open side: a person
