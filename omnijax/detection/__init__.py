@@ -51,9 +51,7 @@ from ._foot import (
 from ._indexing import (
     Sectors as Sectors,
     Thresholds as Thresholds,
-    chi2_variate as chi2_variate,
     hysteresis_sectors as hysteresis_sectors,
-    noncentral_chi2_variate as noncentral_chi2_variate,
 )
 from ._life import (
     CHANGED as CHANGED,

@@ -41,18 +41,6 @@ class Thresholds(eqx.Module):
     c_min: Float[Array, ""]
 
 
-def chi2_variate(key, dof, shape=()) -> Array:
-    """chi-square(dof) draws: 2 Gamma(dof / 2)."""
-    return 2.0 * jax.random.gamma(key, 0.5 * dof, shape)
-
-
-def noncentral_chi2_variate(key, dof, nc, shape=()) -> Array:
-    """Noncentral chi-square(dof, nc) draws: a Poisson(nc / 2) mixture of central ones."""
-    k1, k2 = jax.random.split(key)
-    j = jax.random.poisson(k1, 0.5 * nc, shape)
-    return 2.0 * jax.random.gamma(k2, 0.5 * dof + j, shape)
-
-
 def person_line_lengths(rig: Rig, polar: PolarIndex, key: PRNGKeyArray, n: int) -> Array:
     """Samples ``k`` (px) that a person covers on its centre line, from the priors.
 
