@@ -41,8 +41,8 @@ def foot_sigma_mc(polar: PolarIndex, i: int, contrast, rng: np.random.Generator,
                   dof_per_sample: int = 2, sigma_H_p=0.0) -> Array:
     """Root mean square error (px, of the axis foot's image radius) for a person at hypothesis ``i``,
     one per ``contrast`` (a number or an array of them): ``n_profiles`` profiles drawn with NumPy's
-    samplers (``rng``; exact, and 25 times faster than JAX's rejection samplers on a CPU, which made
-    this table 10 s of every command's start), the estimator run on them in one compiled call."""
+    samplers (``rng``; exact, and about 20 times faster than JAX's rejection samplers on a CPU,
+    which made this table 9 s of every command's start), the estimator run on them in one compiled call."""
     w = np.asarray(polar.window_n, np.float64)
     dof = dof_per_sample * w
     c = np.atleast_1d(np.asarray(contrast, np.float64))
