@@ -540,8 +540,10 @@ def test_two_people_whose_images_overlap_in_azimuth_are_parted_not_merged(paper_
                       support=jnp.ones(K), visible=jnp.ones(K), explained=jnp.zeros((K, 4), jnp.int32),
                       head_only=jnp.zeros(K, bool), from_head=jnp.zeros(K, bool))
 
+    measured = eqx.filter_jit(detections_of)  # one compiled program for the two tables
+
     def feet(d2, rows):
-        d = eqx.filter_jit(detections_of)(det, people(rows), jnp.asarray(d2 * ok))
+        d = measured(det, people(rows), jnp.asarray(d2 * ok))
         valid = np.flatnonzero(np.asarray(d.valid))
         return sorted(float(R[int(np.argmin(np.abs(np.asarray(polar.hyp_r_f) - float(d.r_f[k]))))]) for k in valid)
 
