@@ -134,6 +134,14 @@ class Sigmas(eqx.Module):
     R_h: Float[Array, ""]
 
 
+#: ``[detection] noise_margin``'s default: d^2 is taken against the measured sensor noise times this.
+#: The measured noise is the sensor's (:func:`omnijax.detection.estimate_sensor_noise`); against it
+#: the detector saw floor-coloured people better and more of what is not a person (fragments, ghosts,
+#: coloured shadows). Chosen on tuning seeds 9314-9318 of five scenes (docs/detection.md, "The sensor
+#: noise, measured where people walk": misses and false alarms against the margin).
+NOISE_MARGIN = 1.4
+
+
 class Detection(eqx.Module):
     """Detection settings: sensor noise, rates, contrast, polar sampling, the sigma rule's coefficients
     and the default sigmas of an aim without a detection (:func:`omnijax.aiming.detection_sigmas`).
@@ -174,6 +182,7 @@ class Detection(eqx.Module):
     still_s: float = eqx.field(static=True, default=0.3)
     ghost_s: float = eqx.field(static=True, default=0.4)
     ghost_edge: float = eqx.field(static=True, default=6.0)
+    noise_margin: Float[Array, ""] = eqx.field(default=NOISE_MARGIN, converter=jnp.asarray)
     absorb_s: float = eqx.field(static=True, default=90.0)
     off_floor_m: Float[Array, ""] = eqx.field(default=0.5, converter=jnp.asarray)
     light_axis: tuple[float, float, float] | None = eqx.field(static=True, default=None)
@@ -538,6 +547,12 @@ class DetectionSection(Section):
                           "learnt as background, s")
     foot_mc_profiles: Annotated[int, Field(ge=16, le=4096)] = Field(
         256, description="Monte Carlo profiles per table cell of sigma_r_f")
+    noise_margin: Annotated[float, within(1.0, 10.0, "times the measured noise",
+                                          why="a margin ten times the noise sees nobody")] = Field(
+        NOISE_MARGIN, description="d^2 compares the frame with the background against the sensor noise "
+                                  "measured in the learning frames times this (1: the paper's d^2, chi-square(2) "
+                                  "on the background; more: less sensitive); docs/detection.md, \"The sensor "
+                                  "noise, measured where people walk\"")
     off_floor_m: Annotated[float, within(0.0, 100.0, "metres", why="larger than any room")] = Field(
         0.5, description="a detection whose foot lies farther than this outside the room's floor (beyond "
                          "the outline, or inside an excluded zone) is no person and is dropped, m")
@@ -844,7 +859,7 @@ def parse_rig(
         sigma_extra_theta_f=_a(math.radians(de.sigma_extra_theta_f_deg)),
         sigma_extra_r_f_per_m=_a(de.sigma_extra_r_f_per_m), sigma_lateral_m=_a(de.sigma_lateral_m),
         background_seconds=de.background_seconds, still_s=de.still_s, ghost_s=de.ghost_s,
-        ghost_edge=de.ghost_edge, absorb_s=de.absorb_s,
+        ghost_edge=de.ghost_edge, noise_margin=_a(de.noise_margin), absorb_s=de.absorb_s,
         off_floor_m=_a(de.off_floor_m),
         light_axis=None if de.light_axis is None else tuple(float(x) for x in de.light_axis),
     )

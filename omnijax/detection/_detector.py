@@ -48,6 +48,8 @@ class Detector(eqx.Module):
     #: ``[detection] light_axis``: a change of the light's colour along it, as far as the change of
     #: brightness allows, is no change (:func:`~omnijax.detection.change_across_light`)
     light_axis: tuple[float, float, float] | None = eqx.field(static=True, default=None)
+    #: ``[detection] noise_margin``: d^2 against the learnt sensor noise times this (:func:`line_background`)
+    noise_margin: Float[Array, ""] = eqx.field(default=1.0, converter=jnp.asarray)
 
     @property
     def dof_per_sample(self) -> int:
@@ -73,7 +75,7 @@ def build_detector(rig: Rig, key: PRNGKeyArray | None = None, measure: str = "ch
         foot_sigma=build_foot_sigma_table(polar, k_foot, rig.detection.foot_mc_profiles, dps,
                                           rig.sigmas.H_p),
         sigma_H_p=jnp.asarray(rig.sigmas.H_p), max_people=rig.detection.max_people, measure=measure,
-        light_axis=axis,
+        light_axis=axis, noise_margin=rig.detection.noise_margin,
     )
 
 
@@ -100,9 +102,12 @@ class LineBackground(eqx.Module):
 
 @jax.jit
 def line_background(detector: Detector, bg: Background) -> LineBackground:
-    """A learnt (per pixel) background at the polar line samples."""
+    """A learnt (per pixel) background at the polar line samples, its noise the learnt sensor noise times
+    ``detector.noise_margin`` (what every d^2 of the detector and of the background's life is taken
+    against)."""
     idx = detector.polar.line_index
-    return lines_from(gather_rgb(bg.mean, idx), bg.var_factor.reshape(-1)[idx], bg.sigma.reshape(-1)[idx])
+    sigma = bg.sigma.reshape(-1)[idx] * detector.noise_margin
+    return lines_from(gather_rgb(bg.mean, idx), bg.var_factor.reshape(-1)[idx], sigma)
 
 
 def lines_from(mean, var_factor, sigma) -> LineBackground:
