@@ -146,7 +146,10 @@ def _run_detector(args) -> int:
                 "background_frames": n_bg, "learning": {"frames": n_bg, "seconds": seconds, "step": run_.step_frames,
                                                         "frame_indices": run_.learning_frames},
                 "learning_frames": run_.learning_frames, "background": keeper.summary(),
-                "sensor_sigma_median": float(np.median(np.asarray(keeper.lines.sigma))),
+                # the sensor's noise as measured; d^2 is taken against it times noise_margin
+                "sensor_sigma_median": float(np.median(np.asarray(keeper.lines.sigma))
+                                             / float(run_.perception.detector.noise_margin)),
+                "noise_margin": float(run_.perception.detector.noise_margin),
                 "people_per_frame": float(np.mean(counts)) if counts else 0.0,
                 "frame_ms_mean": 1e3 * (time.perf_counter() - t0) / max(n, 1), "build_s": build_s,
                 "thresholds": {"feasible": bool(th.feasible), "seed_false_alarm_per_frame": float(th.seed_false_alarm),
