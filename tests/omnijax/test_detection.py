@@ -773,12 +773,15 @@ def test_later_passes_recompute_only_a_band_of_lines(paper_detector, monkeypatch
         d2[np.ix_(lines, np.arange(i, int(polar.hyp_out[i])))] += rng.uniform(20, 200)
     args = (polar, jnp.asarray(d2 * ok), jnp.asarray(ok), jnp.ones(polar.n_theta, bool), th.window, th.c_min,
             det.dof_per_sample, det.sigma_H_p, det.max_people)
-    band = _blobs.find_people(*args)
+    # jitted as the detector calls it (static: dof_per_sample, max_people); a new jit after the patch
+    # traces the patched bands
+    find = lambda: jax.jit(_blobs.find_people, static_argnums=(6, 8))(*args)
+    band = find()
     assert _blobs._band_lines(polar) < polar.n_theta
     narrow = _blobs.NARROW_LINES
     monkeypatch.setattr(_blobs, "_band_lines", lambda polar: polar.n_theta)
     monkeypatch.setattr(_blobs, "NARROW_LINES", polar.n_theta)
-    full = _blobs.find_people(*args)
+    full = find()
     assert int(np.asarray(band.valid).sum()) >= 6
     spans = (np.asarray(band.explained[:, 1] - band.explained[:, 0]) + 1)[np.asarray(band.valid)]
     assert (spans <= narrow).any() and (spans > narrow).any(), spans

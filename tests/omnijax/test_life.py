@@ -346,8 +346,9 @@ def test_a_lamps_pool_of_another_colour_is_no_edge_under_the_light_axis(paper_de
     from runtime.files import load_rig
     from tests.paths import CONFIGS
 
-    # the measures as the paper takes them (noise_margin 1: d^2 against the measured noise itself)
-    paper = lambda det: eqx.tree_at(lambda d: d.noise_margin, det, jnp.asarray(1.0))
+    # the measures as the paper takes them (noise_margin 1: d^2 against the measured noise itself; of
+    # the rig's dtype, so that the detector's programs are not compiled again for a weakly typed 1)
+    paper = lambda det: eqx.tree_at(lambda d: d.noise_margin, det, jnp.asarray(1.0, det.noise_margin.dtype))
     two, paper_detector = paper(build_detector(load_rig(CONFIGS / "two_lights.toml"))), paper(paper_detector)
     rng, base, person, _ = room
     lines, dets, cur, _, d2, k, first, last = _one_detection_in_polar(two, [_noisy(rng, base) for _ in range(20)],

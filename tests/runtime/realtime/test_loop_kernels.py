@@ -109,11 +109,15 @@ def test_perceive_drops_a_detection_whose_foot_is_off_the_floor(paper_detector, 
     dets, _, z, _ = perceive(paper_detector, paper_rig, frame, lines)
     zk = np.asarray(z[int(np.argmax(np.asarray(dets.valid)))])
     away = zk + 2.0 * zk / np.linalg.norm(zk) + np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
-    rig = eqx.tree_at(lambda r: (r.room.outline, r.room.exclude), paper_rig, (jnp.asarray(away), ()))
+    # the rig's exclude zones go 100 m away, not out of the rig, and off_floor_m keeps its dtype: the
+    # same pytree as the rig's, so perceive is not compiled again
+    zones = tuple(jnp.asarray(z) + 100.0 for z in paper_rig.room.exclude)
+    rig = eqx.tree_at(lambda r: (r.room.outline, r.room.exclude), paper_rig, (jnp.asarray(away), zones))
     far = float(rig.room.outside_by(zk[0], zk[1]))
     assert 1.4 < far < 2.6
     dropped, _, _, _ = perceive(paper_detector, rig, frame, lines)
     assert not np.asarray(dropped.valid).any()
-    lenient = eqx.tree_at(lambda r: r.detection.off_floor_m, rig, jnp.asarray(far + 0.1))
+    off = paper_rig.detection.off_floor_m
+    lenient = eqx.tree_at(lambda r: r.detection.off_floor_m, rig, jnp.asarray(far + 0.1, off.dtype))
     kept, _, _, _ = perceive(paper_detector, lenient, frame, lines)
     np.testing.assert_array_equal(np.asarray(kept.valid), np.asarray(dets.valid))
