@@ -118,15 +118,6 @@ TALL_MIN = 6
 #: not one or two: the body's round base over the window's lines makes a soft edge of a sample or two
 #: at eq 12's own foot (the edge TALL_EDGE allows for).
 EMPTY_INNER = 3
-#: Unless the legs show: a change that starts EMPTY_INNER or more outward of eq 12's foot and runs, from
-#: there, to within SHORT_SIGMAS prior standard deviations of the height and the model's head (hair of
-#: the floor's colour) of the top of a person standing at its start is a person shorter than the prior,
-#: whole: the foot is where the change starts. Legs behind furniture or of the floor's colour leave the
-#: change a leg's length short of that top (about 40 % of the person; SHORT_SIGMAS 2.5 of the prior is
-#: 7 %, the head 12 %), and keep the foot from the head. standing_start 9325's person 2 (1.66 m, 1.8
-#: sigma short, at 3.5-4.0 m): eq 12's foot 10-12 px inward (0.5-0.6 m), 81 frames of false alarm and
-#: miss. Beyond the paper; docs/detection.md, "Shorter than the prior, legs seen".
-SHORT_SIGMAS = 2.5
 #: The head beyond the change (:func:`_off_prior_height`, with the frame's ``shade``): a head whose skin and
 #: hair have the chromaticity of what lies behind them (a brown floor or cupboard, dark hair whose
 #: chromaticity is noise) ends the person's change at the neck, and eq 12 puts the foot where a person of
@@ -447,20 +438,9 @@ def _off_prior_height(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Arra
         start = jnp.min(jnp.where((r_idx >= people.i[k]) & (q > 0.0), r_idx, R))  # where the change starts
         # not under the camera (that foot is anywhere in the blind disc, a bound of its own)
         empty = people.valid[k] & ~move & (people.i[k] > polar.hyp_first) & (start >= people.i[k] + EMPTY_INNER)
-        # legs that show (SHORT_SIGMAS): the change from its start reaches the top of a person standing there,
-        # shorter than the prior by at most SHORT_SIGMAS standard deviations, whose head may not show
-        s0 = jnp.minimum(start, R - 1)
-        o_s = out[s0]
-        last_s = jnp.max(jnp.where((r_idx >= start) & (r_idx < o_s) & (q > 0.0), r_idx, -1))
-        slack = SHORT_SIGMAS * sigma_H_p * polar.hyp_dout_dH[s0] + (o_s - polar.hyp_head[s0])
-        # and the empty samples inward of the start seen empty: not someone else's (a nearer person's head)
-        inner = (r_idx >= people.i[k]) & (r_idx < start)
-        seen_empty = ~jnp.any(inner & (hidden[reach] | (usable[reach] <= 0)))
-        legs = empty & seen_empty & (start < R) & polar.hyp_ok[s0] & (last_s >= o_s - 1 - slack)
-        empty = empty & ~legs
         i = jnp.where(move, j, people.i[k])
         if shade is None:
-            return i, empty, jnp.where(legs, s0, i)
+            return i, empty, i
         # the head beyond the change's end, seen in brightness (SHADE_LOG): the run of such samples from there
         mid = rows[reach - 1:reach + 2]
         seen = (ok[mid] > 0) & ~hidden[reach - 1:reach + 2]
@@ -485,7 +465,7 @@ def _off_prior_height(polar: PolarIndex, d2: Float[Array, "T R"], ok: Float[Arra
                     & (j_top <= start + HEAD_MIN) & (j_top > people.i[k]))
         j_top = jnp.minimum(j_top, start)
         # a foot at the change's start is seen, not the head's
-        return i, empty & ~(out_move & (j_top >= start)), jnp.where(legs, s0, jnp.where(out_move, j_top, i))
+        return i, empty & ~(out_move & (j_top >= start)), jnp.where(out_move, j_top, i)
 
     i, from_head, foot = jax.vmap(one)(jnp.arange(K))
     explained = e.at[:, 2].set(jnp.minimum(e[:, 2], jnp.maximum(i - MARGIN_R, 0)))
