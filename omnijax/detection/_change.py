@@ -63,21 +63,18 @@ def estimate_sensor_noise(frames: UInt8[ArrayLike, "N H W 3"], floor=0.5, pool: 
     box = lambda x: jax.lax.reduce_window(x, 0.0, jax.lax.add, (pool, pool, 1)[: x.ndim], (1,) * x.ndim,
                                           "SAME") / pool**2
 
-    def pair(i):  # one pair at a time: a stack of differences of 30 frames of 1920 x 1920 is 1.3 GB
-        a, b = frames[i].astype(jnp.float32), frames[i + 1].astype(jnp.float32)
-        d = b - a
-        return d, box(d), (_inside(_planes(a), 0.5, 254.5) & _inside(_planes(b), 0.5, 254.5))[..., None]
+    def pair(i, step=1):  # one pair at a time: a stack of differences of 30 frames of 1920 x 1920 is 1.3 GB
+        a, b = (frames[i + k, ::step, ::step].astype(jnp.float32) for k in (0, 1))
+        return b - a, (_inside(_planes(a), 0.5, 254.5) & _inside(_planes(b), 0.5, 254.5))[..., None]
 
     def spreads(i):  # |d| and |local mean| on every 4th row and column, NaN where clipped
-        a, b = frames[i, ::4, ::4].astype(jnp.float32), frames[i + 1, ::4, ::4].astype(jnp.float32)
-        clear = (_inside(_planes(a), 0.5, 254.5) & _inside(_planes(b), 0.5, 254.5))[..., None]
-        d = frames[i + 1].astype(jnp.float32) - frames[i].astype(jnp.float32)
+        d, clear = pair(i, 4)
         # the pool x pool mean round every 4th pixel only (box(d)[::4, ::4], a 16th of the sums)
         half = pool // 2
-        local = jax.lax.reduce_window(d, 0.0, jax.lax.add, (pool, pool, 1), (4, 4, 1),
+        local = jax.lax.reduce_window(pair(i)[0], 0.0, jax.lax.add, (pool, pool, 1), (4, 4, 1),
                                       ((half, half), (half, half), (0, 0))) / pool**2
         pick = lambda x: jnp.where(clear, jnp.abs(x), jnp.nan)
-        return pick(d[::4, ::4]), pick(local)
+        return pick(d), pick(local)
 
     pairs = jnp.arange(frames.shape[0] - 1)
     d_s, local_s = jax.lax.map(spreads, pairs)
@@ -85,7 +82,8 @@ def estimate_sensor_noise(frames: UInt8[ArrayLike, "N H W 3"], floor=0.5, pool: 
     scale_local = jnp.maximum(1.4826 * jnp.nanmedian(local_s), 0.5 * math.sqrt(2.0) / pool)
 
     def add(acc, i):
-        d, local, _ = pair(i)
+        d = pair(i)[0]
+        local = box(d)
         calm = jnp.all(jnp.abs(local) <= 3.0 * scale_local, axis=-1, keepdims=True) & (jnp.abs(d) <= gate)
         return (acc[0] + calm.sum(-1), acc[1] + jnp.where(calm, d * d, 0.0).sum(-1)), None
 
