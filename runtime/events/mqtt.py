@@ -98,14 +98,13 @@ class MqttPublisher:
 
     def _down(self, what: str, why: str) -> None:
         """The broker cannot be reached: a warning at the first failure of an outage, then quiet."""
-        with self._lock:
-            first = self._down_since is None and not self._closing
-            if first:
-                self._down_since = time.monotonic()
-                self.outages += 1
-        if first:
+        with self._lock:  # the warning is said before the outage is counted: a reader of outages sees both
+            if self._down_since is not None or self._closing:
+                return
+            self._down_since = time.monotonic()
             log.warning("MQTT broker %s %s (%s); retrying every 1-%d s, the events are still written to "
                         "events.jsonl", self.url.shown(), what, why, RETRY_MAX_S)
+            self.outages += 1
 
     def _on_connect(self, client, _userdata, _flags, reason_code, _properties) -> None:
         if reason_code.is_failure:
