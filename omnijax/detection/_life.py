@@ -532,7 +532,10 @@ def nearer_floor(detector: Detector, lines: LineBackground, sure: Bool[Array, "T
             return change_measure(colours, mean, var_factor, lines.sigma)
         return change_across_light(colours, mean, var_factor, lines.sigma, detector.light_axis)
 
-    return jnp.any(jnp.stack([d2(new, m, v) < d2(old, m, v) for m, v in beside]), axis=0)
+    def from_floor(colours):
+        return jnp.minimum(*(d2(colours, m, v) for m, v in beside))
+
+    return from_floor(new) < from_floor(old)
 
 
 @jax.jit
