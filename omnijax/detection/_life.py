@@ -517,14 +517,17 @@ def _floor_beside(sure: Bool[Array, "T R"], lines: LineBackground) -> tuple[tupl
 
 
 def nearer_floor(detector: Detector, lines: LineBackground, sure: Bool[Array, "T R"], new: Float[Array, "T R 3"],
-                 old: Float[Array, "T R 3"]) -> Bool[Array, "T R"]:
+                 old: Float[Array, "T R 3"], one_side: Bool[Array, "T R"] | None = None) -> Bool[Array, "T R"]:
     """Whether each sample's ``new`` colour is nearer than its ``old`` one to the floor beside it (the
     least d^2 from the background ``lines`` at the nearest ``sure`` sample of its radius, either side,
     :func:`_floor_beside`; d^2 as the detector measures it, across the light under ``light_axis``): a
     colour that continues the floor around it, where the other does not.
     The one test of both re-learnings that put a sample's other colour in place of the background's:
     the learning's minority at the start (:func:`settle_learning`) and a ghost's repair from the
-    current frame (:func:`live_step`)."""
+    current frame (:func:`live_step`). Where ``one_side`` holds, nearer than ``old`` on one side is
+    enough: the other side may be an object of the old colour (a stander against a cabinet of their
+    shirt's colour), and colour alone cannot break that tie (the caller knows more: the settling, what
+    the learning's last frames showed)."""
     beside = _floor_beside(sure, lines)
 
     def d2(colours, mean, var_factor):
@@ -532,10 +535,11 @@ def nearer_floor(detector: Detector, lines: LineBackground, sure: Bool[Array, "T
             return change_measure(colours, mean, var_factor, lines.sigma)
         return change_across_light(colours, mean, var_factor, lines.sigma, detector.light_axis)
 
-    def from_floor(colours):
-        return jnp.minimum(*(d2(colours, m, v) for m, v in beside))
-
-    return from_floor(new) < from_floor(old)
+    (new_l, old_l), (new_r, old_r) = ((d2(new, m, v), d2(old, m, v)) for m, v in beside)
+    least = jnp.minimum(new_l, new_r) < jnp.minimum(old_l, old_r)
+    if one_side is None:
+        return least
+    return least | (one_side & ((new_l < old_l) | (new_r < old_r)))
 
 
 @jax.jit
@@ -567,6 +571,9 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
     learnt = lines  # the learning as it was: the floor beside is read from it
     sure = ok & (1.0 / lines.var_factor >= frames - 1.0 - 1e-3)  # every learning frame but one agreed
     took = jnp.zeros(ok.shape, bool)
+    # the last third's minority (learn_background's last candidate): what the spot showed once someone
+    # who stood there left
+    last, last_n = gather_rgb(bg.minority[-1], idx), bg.minority_n[-1].reshape(-1)[idx]
     for j in range(bg.minority.shape[0]):  # each candidate in turn, against the lines settled so far
         minority, minority_n = gather_rgb(bg.minority[j], idx), bg.minority_n[j].reshape(-1)[idx]
         has = (minority_n >= MINORITY_FRAMES) & ok & ~took
@@ -575,7 +582,8 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
         dets = locate_people(detector, d2, find_sectors(detector, d2.sum(-1)))
         ev = ghost_evidence(detector, composite, lines, d2, dets)
         floor = life_candidates(dets) & verdicts(ev, jnp.ones_like(dets.valid), edge)[0]
-        nearer = nearer_floor(detector, learnt, sure, minority, lines.mean)
+        recent = (last_n >= MINORITY_FRAMES) & (change_measure(minority, last, 1.0, lines.sigma) <= CHANGED)
+        nearer = nearer_floor(detector, learnt, sure, minority, lines.mean, one_side=recent)
         take = regions(dets, floor, d2.shape) & has & (d2 > CHANGED) & nearer
         mean = jnp.where(take[..., None], minority, lines.mean)
         var_factor = jnp.where(take, 1.0 / jnp.maximum(minority_n, 1.0), lines.var_factor)
