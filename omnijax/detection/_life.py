@@ -566,7 +566,11 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
     lines holds more than its own person, and someone who stood beside the spot early in the learning and
     then moved on to it (the minority there is that person, the majority the floor) was painted into
     the background as a ghost for the whole clip (stops_a_minute 9098: 1,536 false alarms in 1,600
-    frames). Returns the settled lines and the samples that took their minority."""
+    frames). Where the minority is what the learning's last third showed (its last candidate: someone
+    who stood there left), nearer on one side is enough: the other may be an object of the majority's
+    colour (standing_start 9341: a stander against a cabinet of their shirt's colour; a passer over a
+    rug of their colour leaves the majority in the last frames, six_people 9364).
+    Returns the settled lines and the samples that took their minority."""
     ok, idx = detector.polar.line_ok, detector.polar.line_index
     learnt = lines  # the learning as it was: the floor beside is read from it
     sure = ok & (1.0 / lines.var_factor >= frames - 1.0 - 1e-3)  # every learning frame but one agreed
