@@ -11,7 +11,17 @@ import numpy as np
 import pytest
 
 from omnijax import detect, learn_background, line_background
-from omnijax.detection import CHANGED, LifeRates, ghost_evidence, learned, lines_from, live_step, start_life, verdicts
+from omnijax.detection import (
+    CHANGED,
+    LifeRates,
+    ghost_evidence,
+    learned,
+    lines_from,
+    live_step,
+    set_aside_ghosts,
+    start_life,
+    verdicts,
+)
 from omnijax.detection._detector import change_at
 from omnijax.detection._life import _floor_beside
 from tests.omnijax.test_detection import _noisy, _paint_person
@@ -23,6 +33,9 @@ STILL, GHOST, ABSORB = 2, 5, 12
 #: The evidence as one compiled program (the loop has it inside its own): op by op, each test that read
 #: it took 5-20 s.
 _evidence = eqx.filter_jit(ghost_evidence)
+#: The set-aside likewise (the loop's control step has it inside its own): op by op, the first test that ran
+#: it took 41 s on a loaded machine.
+_set_aside = eqx.filter_jit(set_aside_ghosts)
 
 
 def _rates(adapt_rate=0.05, edge=6.0):
@@ -598,7 +611,7 @@ def test_a_sure_ghost_is_set_aside_for_the_life_and_a_person_is_not(paper_detect
     life candidate). The same with the frame before showing the person still there (they walked off in
     this frame: their region moved) is not set aside. Learnt empty and now with the person there: they
     stay a person."""
-    from omnijax.detection import life_candidates, set_aside_ghosts
+    from omnijax.detection import life_candidates
     from omnijax.detection._indexing import gather_rgb
 
     rng, base, person, _ = room
@@ -610,7 +623,7 @@ def test_a_sure_ghost_is_set_aside_for_the_life_and_a_person_is_not(paper_detect
         frame = jnp.asarray(_noisy(rng, now))
         dets, trace = detect(det, frame, lines)
         assert int(np.asarray(dets.valid).sum()) == 1
-        after, judged = set_aside_ghosts(det, trace, lines, dets, 6.0, polar(_noisy(rng, before)))
+        after, judged = _set_aside(det, trace, lines, dets, 6.0, polar(_noisy(rng, before)))
         assert int(np.asarray(after.valid).sum()) == (0 if ghost else 1)
         assert np.array_equal(np.asarray(life_candidates(after)), np.asarray(life_candidates(dets)))
         # the evidence it judged by goes on in the trace, for the life to read instead of computing it again
@@ -624,15 +637,13 @@ def test_the_life_reads_the_evidence_of_the_perception_step(paper_detector, room
     """``live_step`` given the frame's trace with the set-aside's evidence in it makes the same life as
     computing the evidence itself (one person, nothing set aside: the same detections either way); and
     given some other evidence it uses that (it does not compute its own)."""
-    from omnijax.detection import set_aside_ghosts
-
     rng, base, person, _ = room
     det = paper_detector
     lines = line_background(det, learn_background(np.stack([_noisy(rng, base) for _ in range(20)])))
     life, rates = start_life(lines), _rates()
     frame = jnp.asarray(_noisy(rng, person))
     dets, trace = detect(det, frame, lines)
-    dets, judged = set_aside_ghosts(det, trace, lines, dets, 6.0, life.prev)
+    dets, judged = _set_aside(det, trace, lines, dets, 6.0, life.prev)
     trusted = jnp.zeros(dets.valid.shape, bool)
     alone = live_step(det, life, frame, dets, trace.d2, trusted, rates)
     read = live_step(det, life, frame, dets, trace.d2, trusted, rates, judged)
