@@ -3,6 +3,7 @@ a plain-Python hysteresis, and painted people whose foot is known to the pixel."
 
 from __future__ import annotations
 
+import functools
 import math
 
 import equinox as eqx
@@ -625,8 +626,11 @@ def test_a_person_across_line_0_explains_only_their_own_lines(paper_detector):
     d2[357:360, radii] = 200.0
     d2[175:186, radii] = 60.0
     d2 *= ok
-    people = eqx.filter_jit(find_people)(polar, jnp.asarray(d2), jnp.asarray(ok), jnp.ones(polar.n_theta, bool),
-                                         th.window, th.c_min, det.dof_per_sample, det.sigma_H_p, det.max_people)
+    # jitted as the detector calls it (static: dof_per_sample, max_people): the program of the first call in
+    # test_later_passes_recompute_only_a_band_of_lines, compiled once for both (40 s on a loaded machine)
+    people = jax.jit(find_people, static_argnums=(6, 8))(polar, jnp.asarray(d2), jnp.asarray(ok),
+                                                         jnp.ones(polar.n_theta, bool), th.window, th.c_min,
+                                                         det.dof_per_sample, det.sigma_H_p, det.max_people)
     valid = np.asarray(people.valid)
     centres = sorted(float(c) % polar.n_theta for c in np.asarray(people.centre)[valid])
     assert valid.sum() == 2, centres
@@ -773,9 +777,10 @@ def test_later_passes_recompute_only_a_band_of_lines(paper_detector, monkeypatch
         d2[np.ix_(lines, np.arange(i, int(polar.hyp_out[i])))] += rng.uniform(20, 200)
     args = (polar, jnp.asarray(d2 * ok), jnp.asarray(ok), jnp.ones(polar.n_theta, bool), th.window, th.c_min,
             det.dof_per_sample, det.sigma_H_p, det.max_people)
-    # jitted as the detector calls it (static: dof_per_sample, max_people); a new jit after the patch
-    # traces the patched bands
-    find = lambda: jax.jit(_blobs.find_people, static_argnums=(6, 8))(*args)
+    # jitted as the detector calls it (static: dof_per_sample, max_people), each time of a new function:
+    # jax.jit keeps its traces by function, so a new jit of find_people itself did not trace the patched
+    # bands (the second call was the first's program, and the test compared the band with itself)
+    find = lambda: jax.jit(functools.partial(_blobs.find_people), static_argnums=(6, 8))(*args)
     band = find()
     assert _blobs._band_lines(polar) < polar.n_theta
     narrow = _blobs.NARROW_LINES
