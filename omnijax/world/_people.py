@@ -267,7 +267,22 @@ def walk(rig: Rig, scenario: Scenario, people: People, key: Array, n_frames: int
     pos, ok = _place(rig, scenario.furniture, k_place, n, people.radius, scenario.crowd.gap)
     if not bool(ok):
         raise ValueError(f"people.count = {n}: not everybody fits on the walkable floor")
-    return _simulate(rig, scenario, people, pos, k_walk, n_frames)
+    paths = _simulate(rig, scenario, people, pos, k_walk, simulated_frames(n_frames))
+    return jax.tree.map(lambda a: a[:n_frames], paths)
+
+
+#: Fewest frames a walk is simulated for (see :func:`simulated_frames`).
+MIN_SIMULATED = 512
+
+
+def simulated_frames(n_frames: int) -> int:
+    """The frames a walk of ``n_frames`` is simulated for before it is cut to length: the next power of two,
+    at least :data:`MIN_SIMULATED`. The simulation's length is a static shape (a new length is a new program,
+    10-20 s to compile), and each step draws from its own frame's key and the state before it, so the first
+    ``n_frames`` of a longer walk are the walk itself: one compiled program serves every frame count up to the
+    power of two (a world of 400 frames and a render of 2; demos of 600 and 1000 frames), for at most twice the
+    steps."""
+    return max(MIN_SIMULATED, 1 << (n_frames - 1).bit_length())
 
 
 # --------------------------------------------------------------------------------------

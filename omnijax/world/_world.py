@@ -205,7 +205,8 @@ class World(eqx.Module):
     Build with :func:`build_world`. ``frame(t)`` renders frame ``t`` (0 <= t <
     ``n_frames``, an error otherwise); the same ``t`` always gives the same frame. The
     renderer is compiled for the scene's shapes only: worlds that differ in seed or in
-    the number of frames reuse it.
+    the number of frames reuse it, and the walk's simulation is compiled once for every
+    number of frames up to the same power of two (:func:`~omnijax.world._people.simulated_frames`).
     """
 
     scene: Scene
