@@ -331,14 +331,21 @@ def test_fragments_merge_by_floor_distance_and_under_the_camera():
     np.testing.assert_array_equal(np.asarray(merge_fragments(valid, xy, inner, 0.45)), [True, False, True, True])
 
 
-@eqx.filter_jit
 def _locate(det, d2, shade=None):
-    """Steps 4-6 on a table of d^2 (and of log brightness ratios, ``shade``), one compiled program for
-    the module's tests (op by op, the first test that ran them took 20 s)."""
+    """Steps 4-6 on a table of d^2 and of log brightness ratios, ``shade``, as the detector takes them. Without
+    ``shade``, a table of zeros (the frame as bright as the background): no sample differs from its line's
+    level, no head is seen in brightness, and the people are those of no shade at all (``_off_prior_height``'s
+    ``shade=None``), from the program that the tests with a shade run."""
+    return _locate_jit(det, d2, jnp.zeros(d2.shape, d2.dtype) if shade is None else shade)
+
+
+@eqx.filter_jit
+def _locate_jit(det, d2, shade):
+    """:func:`_locate` as one compiled program for the module's tests (op by op, the first test that ran
+    them took 20 s; one with a shade and one without took 40 s each to compile on a loaded machine)."""
     from omnijax.detection._detector import find_sectors, locate_people
 
-    shade_of = None if shade is None else (lambda rows: shade[rows])
-    return locate_people(det, d2, find_sectors(det, d2.sum(-1)), shade_of)
+    return locate_people(det, d2, find_sectors(det, d2.sum(-1)), lambda rows: shade[rows])
 
 
 def test_a_strip_of_one_line_is_not_a_person(paper_detector):
