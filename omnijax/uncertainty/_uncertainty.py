@@ -83,12 +83,6 @@ def pointing_outputs(x: Float[Array, "9"], profile: RadialProfile) -> Float[Arra
     return jnp.stack([p.pan, p.tilt, p.sin_pan, p.tan_tilt])
 
 
-def _quadratic_form(J, sigma):
-    """``J diag(sigma^2) J^T`` as elementwise products (XLA's CPU dot is slow on 4 x 9 blocks)."""
-    Js = J * sigma
-    return (Js[:, None, :] * Js[None, :, :]).sum(-1)
-
-
 def _floor_outputs(R_p, vartheta, D_c, aim) -> tuple[Array, Array, Array, Array]:
     """``(pan, tilt, sin pan, tan tilt)`` of ``(R_p, vartheta, D_c, aim)``: :func:`pointing`'s second half."""
     p = pointing_from_floor(R_p, vartheta, D_c, aim)
@@ -149,7 +143,7 @@ def gum_second_order(f, x: Float[Array, " n"], sigma: Float[Array, " n"]) -> Flo
     third = jax.vmap(lambda w: jax.jvp(laplacian, (x,), (w,))[1])(J * v)  # (m, m): [a, b]
     Hv = H * v[None, :, None] * v[None, None, :]
     second = 0.5 * (H[:, None] * Hv[None, :]).sum((-1, -2))
-    return _quadratic_form(J, sigma) + second + 0.5 * (third + third.T)
+    return _weighted_outer(list(J.T), v) + second + 0.5 * (third + third.T)
 
 
 def _second_order_one(x, sigma, profile):
