@@ -55,19 +55,27 @@ def head_image_radius(r_f, r_m, H_o, H_p, profile: RadialProfile) -> Array:
 
 @jax.custom_jvp
 def sincos(a: Array) -> tuple[Array, Array]:
-    """``(sin a, cos a)``, evaluated once for the value and every tangent.
+    """``(sin a, cos a)``, each evaluated once for the value and every tangent.
 
-    Its derivative reuses the values behind an optimisation barrier: without it
-    XLA's CPU fusion recomputes sin and cos inside every tangent's loop, which
-    made the 9-input jacfwd over a floor grid several times slower.
+    XLA's CPU fusion counts sin and cos as cheap and copies them into every fused loop that
+    reads them: a floor grid's autodiff covariance computed each of them up to sixteen times,
+    most of its time. ``lax.rem(v, inf)`` is ``v`` exactly for finite ``v`` but counts as
+    costly, so XLA computes it into a buffer of its own, once, and the derivative reuses those
+    values. It is elementwise, so it holds under ``vmap`` too, where a conditional (the
+    world's ``own_buffer``) becomes a select; ``lax.optimization_barrier``, used before, does
+    nothing here (XLA's CPU pipeline removes it before fusion).
     """
-    return jnp.sin(a), jnp.cos(a)
+    return _own_buffer(jnp.sin(a)), _own_buffer(jnp.cos(a))
+
+
+def _own_buffer(v: Array) -> Array:
+    return jax.lax.rem(v, jnp.inf)
 
 
 @sincos.defjvp
 def _sincos_jvp(primals, tangents):
     (a,), (t,) = primals, tangents
-    s, c = jax.lax.optimization_barrier(sincos(a))
+    s, c = sincos(a)
     return (s, c), (c * t, -s * t)
 
 

@@ -5,13 +5,16 @@ independent Gaussian errors of standard deviations ``sigma`` (same order). The
 outputs are ``y = (pan, tilt, sin pan, tan tilt)``; every method returns their
 4 x 4 covariance as a :class:`PointingCovariance`.
 
-- ``autodiff``: ``J Sigma_x J^T`` with ``J`` from ``jax.jacfwd`` of :func:`pointing`'s own code, by
-  its two halves: each input feeds exactly one of ``(R_p, vartheta, D_c, aim)`` (``r_f, H_o, r_m``
-  the floor radius, ``theta_f, theta_c`` the azimuth, ``H_p, R_h, H_f`` the head's height over the
-  PTZ), so ``J = J_2 J_1`` with ``J_1 Sigma_x J_1^T`` diagonal, and the covariance is
-  ``J_2 diag(var R_p, var vartheta, var D_c, var aim) J_2^T`` exactly: four tangents through eqs 3-4
-  (:func:`~omnijax.geometry.pointing_from_floor`) and three through eq 1, instead of nine through both
-  (2-3x faster on the CPU, the same to 1e-11).
+- ``autodiff``: ``J Sigma_x J^T`` with ``J`` by forward-mode autodiff (``jax.jvp``, what ``jax.jacfwd``
+  batches) of :func:`pointing`'s own code, by its two halves: each input feeds exactly one of
+  ``(R_p, vartheta, D_c, aim)`` (``r_f, H_o, r_m`` the floor radius, ``theta_f, theta_c`` the azimuth,
+  ``H_p, R_h, H_f`` the head's height over the PTZ), so ``J = J_2 J_1`` with ``J_1 Sigma_x J_1^T``
+  diagonal, and the covariance is ``J_2 diag(var R_p, var vartheta, var D_c, var aim) J_2^T`` exactly:
+  one tangent along each of the four through eqs 3-4 (:func:`~omnijax.geometry.pointing_from_floor`)
+  and one along each of three through eq 1, the other arguments held (their zero tangents stay
+  symbolic), and the ten distinct entries as scalar products. Over a floor grid most of the time
+  was XLA recomputing sin and cos in every fused loop; :func:`~omnijax.geometry.sincos` computes
+  them once.
 - ``analytic``: the paper's closed forms, literally (eq 13, eq 14), with
   ``sigma_Rp^2`` and ``sigma_Dp^2`` from first-order propagation through eq 1 and
   eq 3 and ``sigma_vartheta^2 = sigma_theta_f^2 + sigma_theta_c^2``. They give the
@@ -80,28 +83,39 @@ def pointing_outputs(x: Float[Array, "9"], profile: RadialProfile) -> Float[Arra
     return jnp.stack([p.pan, p.tilt, p.sin_pan, p.tan_tilt])
 
 
-def _quadratic_form(J, sigma):
-    """``J diag(sigma^2) J^T`` as elementwise products (XLA's CPU dot is slow on 4 x 9 blocks)."""
-    Js = J * sigma
-    return (Js[:, None, :] * Js[None, :, :]).sum(-1)
+def _floor_outputs(R_p, vartheta, D_c, aim) -> tuple[Array, Array, Array, Array]:
+    """``(pan, tilt, sin pan, tan tilt)`` of ``(R_p, vartheta, D_c, aim)``: :func:`pointing`'s second half."""
+    p = pointing_from_floor(R_p, vartheta, D_c, aim)
+    return p.pan, p.tilt, p.sin_pan, p.tan_tilt
 
 
-def _floor_outputs(q: Float[Array, "4"]) -> Float[Array, "4"]:
-    """``(pan, tilt, sin pan, tan tilt)`` of ``q = (R_p, vartheta, D_c, aim)``: :func:`pointing`'s second half."""
-    p = pointing_from_floor(q[0], q[1], q[2], q[3])
-    return jnp.stack([p.pan, p.tilt, p.sin_pan, p.tan_tilt])
+def _along(f, args, i):
+    """The derivative of ``f(*args)`` along its ``i``-th (scalar) argument: ``jax.jvp`` with the
+    others held fixed, so their zero tangents stay symbolic and cost nothing."""
+    return jax.jvp(lambda a: f(*args[:i], a, *args[i + 1:]), (args[i],), (jnp.ones_like(args[i]),))[1]
+
+
+def _weighted_outer(cols, v) -> Float[Array, "m m"]:
+    """``J diag(v) J^T = sum_k v_k c_k c_k^T`` from the columns ``c_k`` of ``J`` (m scalars each), its
+    m (m + 1) / 2 distinct entries as scalar products: a batched dot or reduction over blocks this
+    small is slow on XLA's CPU."""
+    m = len(cols[0])
+    e = {}
+    for a in range(m):
+        for b in range(a, m):
+            e[a, b] = e[b, a] = sum(vk * c[a] * c[b] for vk, c in zip(v, cols))
+    return jnp.stack([e[a, b] for a in range(m) for b in range(m)]).reshape(m, m)
 
 
 def _autodiff_one(x, sigma, profile):
     r_f, theta_f, H_o, H_f, D_c, theta_c, r_m, H_p, R_h = x
-    v = sigma**2
-    v_rf, v_thf, v_Ho, v_Hf, v_Dc, v_thc, v_rm, v_Hp, v_Rh = v
-    radius = lambda a: floor_radius(a[0], a[2], a[1], profile)[0]  # a = (r_f, H_o, r_m)
-    a = jnp.stack([r_f, H_o, r_m])
-    g = jax.jacfwd(radius)(a)
-    q = jnp.stack([radius(a), theta_f - theta_c, D_c, H_p - R_h - H_f])
-    var_q = jnp.stack([g[0] ** 2 * v_rf + g[1] ** 2 * v_Ho + g[2] ** 2 * v_rm, v_thf + v_thc, v_Dc, v_Hp + v_Rh + v_Hf])
-    return _quadratic_form(jax.jacfwd(_floor_outputs)(q), jnp.sqrt(var_q))
+    v_rf, v_thf, v_Ho, v_Hf, v_Dc, v_thc, v_rm, v_Hp, v_Rh = sigma**2
+    radius = lambda r_f, H_o, r_m: floor_radius(r_f, r_m, H_o, profile)[0]
+    a = (r_f, H_o, r_m)
+    g_rf, g_Ho, g_rm = (_along(radius, a, i) for i in range(3))
+    q = (radius(*a), theta_f - theta_c, D_c, H_p - R_h - H_f)
+    var_q = (g_rf**2 * v_rf + g_Ho**2 * v_Ho + g_rm**2 * v_rm, v_thf + v_thc, v_Dc, v_Hp + v_Rh + v_Hf)
+    return _weighted_outer([_along(_floor_outputs, q, k) for k in range(4)], var_q)
 
 
 def gum_second_order(f, x: Float[Array, " n"], sigma: Float[Array, " n"]) -> Float[Array, "m m"]:
@@ -129,7 +143,7 @@ def gum_second_order(f, x: Float[Array, " n"], sigma: Float[Array, " n"]) -> Flo
     third = jax.vmap(lambda w: jax.jvp(laplacian, (x,), (w,))[1])(J * v)  # (m, m): [a, b]
     Hv = H * v[None, :, None] * v[None, None, :]
     second = 0.5 * (H[:, None] * Hv[None, :]).sum((-1, -2))
-    return _quadratic_form(J, sigma) + second + 0.5 * (third + third.T)
+    return _weighted_outer(list(J.T), v) + second + 0.5 * (third + third.T)
 
 
 def _second_order_one(x, sigma, profile):
@@ -196,7 +210,7 @@ def _covariance(x, sigma, profile, method):
     batch = x.shape[:-1]
     xf, sf = x.reshape(-1, x.shape[-1]), jnp.broadcast_to(sigma, x.shape).reshape(-1, x.shape[-1])
     cov = jax.vmap(kernel, in_axes=(0, 0, None))(xf, sf, profile)
-    valid = pointing(xf, profile).valid
+    valid = jax.vmap(lambda xi: pointing(xi, profile).valid)(xf)  # per point as the kernels: XLA shares their trig
     return PointingCovariance(cov=cov.reshape(*batch, 4, 4), valid=valid.reshape(batch))
 
 
