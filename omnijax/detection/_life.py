@@ -37,12 +37,16 @@ frame (:func:`live_step`, two jitted calls), after detection, with the frame's d
    changed: +1 for each frame it lies in a ghost's region, -1 for each frame it lies in a person's
    (a detection with a person's edge), none while no detection claims it or gives no verdict; a
    ghost's evidence flickers about the threshold from frame to frame, and a run of ghost frames
-   would be broken by each flicker. In the region of a trusted detection (someone the tracker saw
-   walk in is there), only where the frame continues the floor beside the sample (the nearest
-   samples of its radius outside every detection, settled and unchanged now, either side) better
-   than the background does (:func:`nearer_floor`): a ghost's region is its whole run of lines, and
-   someone in it now (walking off the spot, in along their own line, or standing in its middle) is
-   as still from frame to frame as the ghost's floor, but is not the floor.
+   would be broken by each flicker. A sample on a detection's lines (any radius) still for
+   ``floor_shows_frames`` where the frame shows the floor beside the region and the background did not
+   (:func:`floor_shows`) votes +1 whatever the region's verdict: someone learnt in who walks out along
+   their own line is one detection with their ghost, a person's verdict. In the region of a trusted
+   detection (someone the tracker saw walk in is there), only where the frame continues the floor
+   beside the sample (the nearest samples of its radius outside every detection, settled and
+   unchanged now, either side) better than the background does (:func:`nearer_floor`): a ghost's
+   region is its whole run of lines, and someone in it now (walking off the spot, in along their
+   own line, or standing in its middle) is as still from frame to frame as the ghost's floor, but is
+   not the floor.
    A sample the learning left unsettled (kept in fewer than two thirds of its frames: someone
    stood there through a third of them) is repaired after :data:`UNSETTLED_VOTES` such frames when
    the ghost shows both signs (an edge in the background, none now) and is not a trusted detection:
@@ -301,7 +305,7 @@ def floor_shows(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBackg
     r = jnp.arange(R)
     flank = _flank_lines(detector)  # (F, R)
     first, last = dets.region[k, 0], dets.region[k, 1]
-    b = jnp.concatenate([first[:, None, None] - flank[None], last[:, None, None] + flank[None]], axis=1) % T  # (T, 2F, R)
+    b = jnp.concatenate([first[:, None, None] - flank, last[:, None, None] + flank], axis=1) % T  # (T, 2F, R)
     rb = jnp.broadcast_to(r, b.shape)
     flank_ok = detector.polar.line_ok[b, rb] & ~people[b, rb]
     mean, var_factor = lines.mean[b, rb], lines.var_factor[b, rb]
