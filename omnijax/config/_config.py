@@ -181,6 +181,7 @@ class Detection(eqx.Module):
     background_seconds: float = eqx.field(static=True, default=10.0)
     still_s: float = eqx.field(static=True, default=0.3)
     ghost_s: float = eqx.field(static=True, default=0.4)
+    floor_shows_s: float = eqx.field(static=True, default=1.0)
     ghost_edge: float = eqx.field(static=True, default=6.0)
     noise_margin: Float[Array, ""] = eqx.field(default=NOISE_MARGIN, converter=jnp.asarray)
     absorb_s: float = eqx.field(static=True, default=90.0)
@@ -539,6 +540,10 @@ class DetectionSection(Section):
     ghost_s: Annotated[float, within(0.0, 60.0, "seconds", why="a minute")] = Field(
         0.4, description="a changed sample inside a ghost (a detection with no object edge) this long is "
                          "re-learnt, s")
+    floor_shows_s: Annotated[float, within(0.0, 60.0, "seconds", why="a minute")] = Field(
+        1.0, description="a changed sample on a detection's lines still this long, where the frame continues "
+                         "the floor beside the region and the background did not, gets a ghost's votes "
+                         "whatever the region's verdict (someone learnt in who walks out along their line), s")
     ghost_edge: Annotated[float, within(0.0, 1e6, "a mean d^2", open_low=True,
                                         why="an edge so strong no object has it")] = Field(
         6.0, description="object-edge test: mean least d^2 across a person's edge below this is no edge")
@@ -859,6 +864,7 @@ def parse_rig(
         sigma_extra_theta_f=_a(math.radians(de.sigma_extra_theta_f_deg)),
         sigma_extra_r_f_per_m=_a(de.sigma_extra_r_f_per_m), sigma_lateral_m=_a(de.sigma_lateral_m),
         background_seconds=de.background_seconds, still_s=de.still_s, ghost_s=de.ghost_s,
+        floor_shows_s=de.floor_shows_s,
         ghost_edge=de.ghost_edge, noise_margin=_a(de.noise_margin), absorb_s=de.absorb_s,
         off_floor_m=_a(de.off_floor_m),
         light_axis=None if de.light_axis is None else tuple(float(x) for x in de.light_axis),

@@ -58,6 +58,7 @@ from ._life import (
     Evidence as Evidence,
     Life as Life,
     LifeRates as LifeRates,
+    floor_shows as floor_shows,
     ghost_evidence as ghost_evidence,
     learned_share as learned_share,
     live_step as live_step,

@@ -37,12 +37,16 @@ frame (:func:`live_step`, two jitted calls), after detection, with the frame's d
    changed: +1 for each frame it lies in a ghost's region, -1 for each frame it lies in a person's
    (a detection with a person's edge), none while no detection claims it or gives no verdict; a
    ghost's evidence flickers about the threshold from frame to frame, and a run of ghost frames
-   would be broken by each flicker. In the region of a trusted detection (someone the tracker saw
-   walk in is there), only where the frame continues the floor beside the sample (the nearest
-   samples of its radius outside every detection, settled and unchanged now, either side) better
-   than the background does (:func:`nearer_floor`): a ghost's region is its whole run of lines, and
-   someone in it now (walking off the spot, in along their own line, or standing in its middle) is
-   as still from frame to frame as the ghost's floor, but is not the floor.
+   would be broken by each flicker. A sample on a detection's lines (any radius) still for
+   ``floor_shows_frames`` where the frame shows the floor beside the region and the background did not
+   (:func:`floor_shows`) votes +1 whatever the region's verdict: someone learnt in who walks out along
+   their own line is one detection with their ghost, a person's verdict. In the region of a trusted
+   detection (someone the tracker saw walk in is there), only where the frame continues the floor
+   beside the sample (the nearest samples of its radius outside every detection, settled and
+   unchanged now, either side) better than the background does (:func:`nearer_floor`): a ghost's
+   region is its whole run of lines, and someone in it now (walking off the spot, in along their
+   own line, or standing in its middle) is as still from frame to frame as the ghost's floor, but is
+   not the floor.
    A sample the learning left unsettled (kept in fewer than two thirds of its frames: someone
    stood there through a third of them) is repaired after :data:`UNSETTLED_VOTES` such frames when
    the ghost shows both signs (an edge in the background, none now) and is not a trusted detection:
@@ -203,9 +207,8 @@ def ghost_evidence(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBa
     polar = detector.polar
     T, R = d2.shape
     step = 2 * jnp.pi / T
-    spacing = polar.radii * step  # px between neighbouring lines at each radius
-    inner = jnp.ceil(INNER_PX / spacing).astype(jnp.int32)  # (R,)
-    flank = jnp.stack([jnp.ceil(px / spacing).astype(jnp.int32) for px in FLANK_PX])  # (F, R)
+    inner = jnp.ceil(INNER_PX / _spacing(detector)).astype(jnp.int32)  # (R,)
+    flank = _flank_lines(detector)  # (F, R)
     first = jnp.round(dets.theta_l / step).astype(jnp.int32)
     width = jnp.round(((dets.theta_r - dets.theta_l) % (2 * jnp.pi)) / step).astype(jnp.int32)
     last = first + width
@@ -267,6 +270,52 @@ def ghost_evidence(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBa
                     person_before=jnp.stack(person_before, -1))
 
 
+def _spacing(detector: Detector) -> Float[Array, " R"]:
+    """Pixels between neighbouring lines at each radius."""
+    polar = detector.polar
+    return polar.radii * (2 * jnp.pi / polar.n_theta)
+
+
+def _flank_lines(detector: Detector) -> Array:
+    """Lines between an edge line and its flank samples at each radius (:data:`FLANK_PX` pixels out,
+    rounded up), (F, R)."""
+    return jnp.stack([jnp.ceil(px / _spacing(detector)).astype(jnp.int32) for px in FLANK_PX])
+
+
+def floor_shows(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBackground, dets: Detections,
+                which: Bool[Array, " K"], people: Bool[Array, "T R"]) -> Bool[Array, "T R"]:
+    """Whether the frame ``cur`` shows the floor at each polar sample on the lines of a detection in
+    ``which`` (at any radius; elsewhere False): at one of the region's flanks (:data:`FLANK_PX` outside
+    its first or last line, at the sample's radius; a flank in ``people``, some person's region, or not
+    ``line_ok``, does not count), the frame is within :data:`CHANGED` of the flank's background and the
+    sample's background is :data:`ASIDE_BEFORE` or more from it. d^2 of eq 6-7 (:func:`change_measure`)
+    both, also under ``light_axis``: the sample and its flank are a few pixels apart under the same light
+    now, and across the light a walker's shadow on a warm floor matched a grey floor beside it
+    (two_spectra 9389). A ghost's sample shows the floor beside it and had a person's colour; someone's
+    shows neither. A sample on the lines of several such detections is read at the first one's flanks.
+
+    :func:`verdicts` reads a region's sides; this reads inside it, sample by sample: someone who stood
+    through the learning and walks out along their own line is one detection with their ghost, whose
+    sides show the walker's edge (a person's verdict: every sample a person's vote) while the ghost
+    reaches inward of the walker's foot (standing_start 9360)."""
+    T, R = people.shape
+    in_lines, _ = _in_region(dets, jnp.arange(T), jnp.arange(R), T)  # (K, T)
+    on = which[:, None] & in_lines
+    k = jnp.argmax(on, axis=0)  # (T,): the first such detection at each line
+    r = jnp.arange(R)
+    flank = _flank_lines(detector)  # (F, R)
+    first, last = dets.region[k, 0], dets.region[k, 1]
+    b = jnp.concatenate([first[:, None, None] - flank, last[:, None, None] + flank], axis=1) % T  # (T, 2F, R)
+    rb = jnp.broadcast_to(r, b.shape)
+    flank_ok = detector.polar.line_ok[b, rb] & ~people[b, rb]
+    mean, var_factor = lines.mean[b, rb], lines.var_factor[b, rb]
+    sig = lines.sigma[:, None]
+    at = lambda colours: jnp.broadcast_to(colours[:, None], mean.shape)  # the sample's, against each flank
+    floor_now = change_measure(at(cur), mean, var_factor, sig) < CHANGED
+    person_before = change_measure(at(lines.mean), mean, var_factor, sig) >= ASIDE_BEFORE
+    return jnp.any(on, axis=0)[:, None] & jnp.any(flank_ok & floor_now & person_before, axis=1)
+
+
 def _elsewhere(dets: Detections, a: Array, rr: Array, T: int) -> Bool[Array, "K ..."]:
     """Whether the sample (line ``a[k, ...]``, radius index ``rr[k, ...]``) measured for detection ``k`` lies
     in the explained region of another person (a valid detection). Such a sample speaks for that person,
@@ -305,7 +354,11 @@ def regions(dets: Detections, which: Bool[Array, " K"], shape) -> Bool[Array, "T
 
 class LifeRates(eqx.Module):
     """The life's time constants in frames (from the rig's ``[detection]`` seconds and the frame rate,
-    :func:`runtime.realtime.perception.life_rates`) and the drift rate per frame."""
+    :func:`runtime.realtime.perception.life_rates`) and the drift rate per frame. ``floor_shows_frames``:
+    how long a changed sample must have been still before :func:`floor_shows` gives it a ghost's vote
+    (``floor_shows_s``, 1 s): a ghost's samples are still from the moment its person left them, a walker's
+    only while uniform clothes slide over them (10-20 frames at 25 per second); a walker dressed like a
+    flank of the floor matched it and was painted in (three_people 9386, 9398)."""
 
     adapt_rate: Float[Array, ""]
     edge: Float[Array, ""]
@@ -313,6 +366,7 @@ class LifeRates(eqx.Module):
     ghost_frames: Float[Array, ""]
     absorb_frames: Float[Array, ""]
     learn_frames: Float[Array, ""]
+    floor_shows_frames: Float[Array, ""]
 
 
 class Renewal(eqx.Module):
@@ -358,9 +412,16 @@ def _judge(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: D
     step = change_measure(cur, life.prev, 1.0, lines.sigma)
     still = jnp.where(changed & (step < CHANGED), life.still + 1.0, 0.0)
     rest = jnp.where(changed, life.rest + (step < CHANGED), 0.0)
+    # a sample that has been still a while and shows the floor beside its detection's region, where the
+    # background had a person's colour, is a ghost's whatever the region's verdict (floor_shows; the
+    # test only in a frame that has a sample still that long)
+    long_still = changed & (still >= rates.floor_shows_frames)
+    shows = lax.cond(jnp.any(long_still),
+                     lambda: floor_shows(detector, cur, lines, dets, valid, occupied) & long_still,
+                     lambda: jnp.zeros(shape, bool))
     # a vote, not a run: +1 in a ghost's region, -1 in a person's, held where the sample changed and
     # nobody claims it; the evidence of one ghost flickers about the edge threshold from frame to frame
-    vote = jnp.where(in_ghost & ~people, 1.0, jnp.where(people, -1.0, 0.0))
+    vote = jnp.where((in_ghost & ~people) | shows, 1.0, jnp.where(people, -1.0, 0.0))
     ghost = jnp.where(changed, jnp.maximum(life.ghost + vote, 0.0), 0.0)
     # what the learning left unsettled (occupied through a third of its frames or more) holds a ghost
     # of someone who stood there at the learning's start as often as not: repaired on its first votes

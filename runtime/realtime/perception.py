@@ -76,7 +76,7 @@ def life_rates(rig: Rig, fps: float | None, learning_frames: int, every: int = 1
     f = lambda s: jnp.asarray(max(1.0, s * per_s))
     return LifeRates(adapt_rate=jnp.asarray(float(d.adapt_rate) * every), edge=jnp.asarray(float(d.ghost_edge)),
                      still_frames=f(d.still_s), ghost_frames=f(d.ghost_s), absorb_frames=f(d.absorb_s),
-                     learn_frames=jnp.asarray(float(learning_frames)))
+                     learn_frames=jnp.asarray(float(learning_frames)), floor_shows_frames=f(d.floor_shows_s))
 
 
 @dataclass
