@@ -204,13 +204,26 @@ def change_against(
     current: Float[ArrayLike, "*b 3"], ref: ReferenceTerms, sigma: Float[ArrayLike, "*#b"]
 ) -> Float[Array, "*b"]:
     """d^2 of eq 6-7 (corrected) of ``current`` against precomputed background terms."""
+    return change_of_terms(current_terms(current), ref, sigma)
+
+
+def current_terms(current: Float[ArrayLike, "*b 3"]) -> tuple[Array, ...]:
+    """The current colour's half of eq 6-7 (:func:`change_of_terms`): its chromaticity, eq 5's covariance
+    entries per unit noise variance, and whether it is unclipped; computed once where one colour is
+    measured against several backgrounds (broadcast)."""
     cur = _planes(current)
-    r1, g1, a1, b1, c1 = chromaticity_planes(*cur)
+    return (*chromaticity_planes(*cur), _inside(cur, 0.5, 254.5))
+
+
+def change_of_terms(cur: tuple[Array, ...], ref: ReferenceTerms, sigma: Float[ArrayLike, "*#b"]) -> Float[Array, "*b"]:
+    """d^2 of eq 6-7 (corrected) from the current colour's terms (:func:`current_terms`) and the
+    background's (:func:`reference_terms`)."""
+    r1, g1, a1, b1, c1, inside = cur
     s2 = jnp.asarray(sigma, jnp.float32) ** 2
     a, b, c = s2 * (a1 + ref.rr), s2 * (b1 + ref.rg), s2 * (c1 + ref.gg)
     dx, dy = r1 - ref.r, g1 - ref.g
     d2 = (c * dx * dx - 2 * b * dx * dy + a * dy * dy) / (a * c - b * b)
-    return jnp.where(_inside(cur, 0.5, 254.5) & ref.unclipped, d2, 2.0)
+    return jnp.where(inside & ref.unclipped, d2, 2.0)
 
 
 def change_across_light(current: Float[ArrayLike, "*b 3"], background: Float[ArrayLike, "*b 3"],
