@@ -759,3 +759,35 @@ def test_a_ghost_is_repaired_inward_of_someone_who_walked_out_of_it_along_their_
     assert ghost.sum() > 20 and walker.sum() > 300
     assert np.mean(d2[ghost] > CHANGED) < 0.1  # the ghost they left is repaired
     assert np.mean(d2[walker] > CHANGED) > 0.95  # the walker is not
+
+
+def test_floor_shows_reads_the_lines_asked_for_a_chunk_at_a_time_as_all_at_once(paper_detector, room, monkeypatch):
+    """``floor_shows`` computes only the lines that hold a ``needed`` sample, FLOOR_SHOWS_LINES at a time:
+    chunks of 4 lines give, on those lines, what all 360 lines at once give (False elsewhere), and on a
+    ghost (someone learnt in, gone now) the floor shows somewhere."""
+    from omnijax.detection import _life
+    from omnijax.detection._detector import polar_frame
+
+    _, base, person, _ = room
+    det = paper_detector
+    rng = np.random.default_rng(23)
+    lines = line_background(det, learn_background(np.stack([_noisy(rng, person) for _ in range(10)])))
+    frame = jnp.asarray(_noisy(rng, base))
+    dets, trace = detect(det, frame, lines)
+    valid = _life.life_candidates(dets)
+    assert np.asarray(valid).any()
+    cur, T = polar_frame(det, frame), det.polar.n_theta
+    people = _life.regions(dets, valid, trace.d2.shape)
+
+    def shows(chunk, needed=None):
+        monkeypatch.setattr(_life, "FLOOR_SHOWS_LINES", chunk)  # read when traced: a new program each
+        return np.asarray(jax.jit(_life.floor_shows)(det, cur, lines, dets, valid, people, needed))
+
+    whole = shows(T)
+    assert whole.any()
+    on_lines = np.flatnonzero(whole.any(1))
+    needed = np.zeros(whole.shape, bool)
+    asked = rng.choice(on_lines, size=max(1, on_lines.size // 2), replace=False)
+    needed[asked, rng.integers(0, whole.shape[1], asked.size)] = True  # one sample a line asked for
+    np.testing.assert_array_equal(shows(4, jnp.asarray(needed)), whole & needed.any(1)[:, None])
+    np.testing.assert_array_equal(shows(4), whole)
