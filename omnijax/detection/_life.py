@@ -302,7 +302,7 @@ def floor_shows(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBackg
     ``which`` (at any radius; elsewhere False): at one of the region's flanks (:data:`FLANK_PX` outside
     its first or last line, at the sample's radius; a flank in ``people``, some person's region, or not
     ``line_ok``, does not count), the frame is within :data:`CHANGED` of the flank's background and the
-    sample's background is :data:`ASIDE_BEFORE` or more from it. d^2 of eq 6-7 (:func:`change_measure`)
+    sample's background is :data:`ASIDE_BEFORE` or more from it. d^2 of eq 6-7 (:func:`change_of_terms`)
     both, also under ``light_axis``: the sample and its flank are a few pixels apart under the same light
     now, and across the light a walker's shadow on a warm floor matched a grey floor beside it
     (two_spectra 9389). A ghost's sample shows the floor beside it and had a person's colour; someone's
@@ -445,11 +445,9 @@ def _judge(detector: Detector, life: Life, frame: UInt8[Array, "H W 3"], dets: D
     rest = jnp.where(changed, life.rest + (step < CHANGED), 0.0)
     # a sample that has been still a while and shows the floor beside its detection's region, where the
     # background had a person's colour, is a ghost's whatever the region's verdict (floor_shows; the
-    # test only in a frame that has a sample still that long)
+    # lines only where a sample is still that long: none in most frames)
     long_still = changed & (still >= rates.floor_shows_frames)
-    shows = lax.cond(jnp.any(long_still),
-                     lambda: floor_shows(detector, cur, lines, dets, valid, occupied, long_still) & long_still,
-                     lambda: jnp.zeros(shape, bool))
+    shows = floor_shows(detector, cur, lines, dets, valid, occupied, long_still) & long_still
     # a vote, not a run: +1 in a ghost's region, -1 in a person's, held where the sample changed and
     # nobody claims it; the evidence of one ghost flickers about the edge threshold from frame to frame
     vote = jnp.where((in_ghost & ~people) | shows, 1.0, jnp.where(people, -1.0, 0.0))
