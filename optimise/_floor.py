@@ -30,13 +30,18 @@ class FloorGrid:
     inside: np.ndarray
     step: float
 
+    def _points(self) -> tuple[np.ndarray, np.ndarray]:
+        """The inside points' (X, Y) on the host."""
+        return (np.broadcast_to(self.xs[None, :], self.inside.shape)[self.inside],
+                np.broadcast_to(self.ys[:, None], self.inside.shape)[self.inside])
+
     @property
     def X(self) -> Float[Array, " n"]:
-        return jnp.asarray(np.broadcast_to(self.xs[None, :], self.inside.shape)[self.inside])
+        return jnp.asarray(self._points()[0])
 
     @property
     def Y(self) -> Float[Array, " n"]:
-        return jnp.asarray(np.broadcast_to(self.ys[:, None], self.inside.shape)[self.inside])
+        return jnp.asarray(self._points()[1])
 
     @property
     def size(self) -> int:
@@ -44,11 +49,13 @@ class FloorGrid:
 
     def padded(self, multiple: int = PAD_TO) -> tuple[Float[Array, " m"], Float[Array, " m"], Bool[Array, " m"]]:
         """``(X, Y, live)``: the points, repeated at the end up to a multiple of ``multiple``, and which
-        are real. Rooms of similar size then share one compiled program (and its cache entry)."""
+        are real. Rooms of similar size then share one compiled program (and its cache entry). Built on
+        the host: indexing device arrays is an eager program (to compile) per shape."""
         n = self.size
         m = -(-n // multiple) * multiple
         pad = np.arange(m) % n
-        return self.X[pad], self.Y[pad], jnp.asarray(np.arange(m) < n)
+        X, Y = self._points()
+        return jnp.asarray(X[pad]), jnp.asarray(Y[pad]), jnp.asarray(np.arange(m) < n)
 
     @property
     def extent(self) -> tuple[float, float, float, float]:

@@ -52,12 +52,15 @@ class Box(eqx.Module):
     upper: Float[Array, " k"]
     periodic: tuple[bool, ...] = eqx.field(static=True)
 
+    # Jitted, as they are called on the host too: eagerly, each jnp operation was a program to compile.
+    @jax.jit
     def from_unconstrained(self, u: Float[Array, "*c k"]) -> Float[Array, "*c k"]:
         """``x = lower + (upper - lower) (1 + sin u) / 2``; periodic variables pass through (broadcasts
         over leading axes, e.g. cameras)."""
         bounded = self.lower + (self.upper - self.lower) * 0.5 * (1.0 + jnp.sin(u))
         return jnp.where(jnp.asarray(self.periodic), u, bounded)
 
+    @jax.jit
     def to_unconstrained(self, x: Float[Array, "*c k"]) -> Float[Array, "*c k"]:
         """The ``u`` in ``[-pi / 2, pi / 2]`` that :meth:`from_unconstrained` maps to ``x`` (inside the box)."""
         frac = (x - self.lower) / (self.upper - self.lower)

@@ -199,6 +199,9 @@ class Room(eqx.Module):
         """Whether floor points (X, Y) lie inside the outline (where a person can be)."""
         return _in_polygon(self.outline, X, Y)
 
+    # Jitted: called eagerly (a floor grid, a config check), each of their dozen jnp operations was a
+    # program of its own to compile, about 20 ms each at a cold start.
+    @jax.jit
     def contains(self, X, Y) -> Array:
         """Whether floor points (X, Y) lie inside the outline and outside every excluded zone."""
         inside = self.inside_outline(X, Y)
@@ -206,6 +209,7 @@ class Room(eqx.Module):
             inside = inside & ~_in_polygon(zone, X, Y)
         return inside
 
+    @jax.jit
     def outside_by(self, X, Y) -> Array:
         """How far (m) floor points (X, Y) lie from where a person can stand: 0 inside the outline and
         outside every excluded zone, else the distance to the outline (outside it) or to the zone's
@@ -217,6 +221,7 @@ class Room(eqx.Module):
         return d
 
 
+@jax.jit
 def _edge_distance(poly: Float[Array, "n 2"], X, Y) -> Array:
     """Distance from (X, Y) to the nearest point of the polygon's edges."""
     X, Y = jnp.asarray(X)[..., None], jnp.asarray(Y)[..., None]
@@ -226,6 +231,7 @@ def _edge_distance(poly: Float[Array, "n 2"], X, Y) -> Array:
     return jnp.min(jnp.hypot(X - x0 - t * ex, Y - y0 - t * ey), axis=-1)
 
 
+@jax.jit
 def _in_polygon(poly: Float[Array, "n 2"], X, Y) -> Array:
     """Even-odd rule: a horizontal ray from (X, Y) crosses the polygon's edges an odd number of times."""
     X, Y = jnp.asarray(X)[..., None], jnp.asarray(Y)[..., None]
@@ -707,7 +713,9 @@ class RigFile(Section):
 
 
 def _a(x) -> Array:
-    return jnp.asarray(x, dtype=float)
+    """``x`` as a float array, converted on the host (on the device, a jax array of another dtype is a
+    program to compile)."""
+    return jnp.asarray(np.asarray(x, dtype=float))
 
 
 def _omni_camera(sec: OmniSection, read_text: Callable[[str], str] | None, source: str) -> OmniCamera:
