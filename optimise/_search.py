@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Float
 
 from omnijax import LAYOUT_NAMES, Rig
@@ -109,12 +110,38 @@ def search_box(rig: Rig) -> Box:
     return Box(names=spec.vary, lower=jnp.asarray(lower), upper=jnp.asarray(upper), periodic=periodic)
 
 
+def _with_gradient(f: Callable[[Array, object], Array]) -> Callable[[Array, object], Array]:
+    """``f(u, args)`` whose derivative in ``u`` is computed with its value, in forward mode (one tangent
+    per variable), and handed on as the gradient's dot product with the tangent.
+
+    optimistix's BFGS linearises its function and applies the linear part in the branch of an accepted
+    step: the objective was in its program twice, the value with its residuals in the loop and the
+    tangent program in a ``cond`` (about 15 % more to compile, 6.1 against 5.2 s of CPU for the paper's
+    rig). The price: the gradient is also computed at line-search points that are rejected. ``args``
+    are not differentiated (a tangent of theirs is refused).
+    """
+    g = jax.custom_jvp(f)
+
+    def jvp(primals, tangents):
+        (u, args), (du, d_args) = primals, tangents
+        zero = lambda t: isinstance(t, SymbolicZero)
+        if not all(map(zero, jax.tree.leaves(d_args, is_leaf=zero))):
+            raise ValueError("the objective is differentiated in u only")
+        basis = jnp.eye(u.shape[0], dtype=u.dtype)
+        value, grad = jax.vmap(lambda e: jax.jvp(lambda v: f(v, args), (u,), (e,)), out_axes=(None, 0))(basis)
+        return value, jnp.zeros_like(value) if zero(du) else grad @ du
+
+    g.defjvp(jvp, symbolic_zeros=True)
+    return g
+
+
 @eqx.filter_jit
 def _minimise(rig: Rig, box: Box, base: Layout, X, Y, live, step: float, u0, sharpness):
     """BFGS on the unconstrained variables from ``u0``: ``(u, steps, converged)``."""
     spec = rig.layout
     sense = SENSE[spec.objective]
 
+    @_with_gradient
     def loss(u, args):
         rig, box, base, X, Y, live, sharpness = args
         layout = box.layout(box.from_unconstrained(u), base)
