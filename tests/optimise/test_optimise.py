@@ -257,3 +257,25 @@ def test_optimise_bad_flags_exit_2_and_write_nothing(tmp_path, capsys, args, exp
     _, err = capsys.readouterr()
     assert code == 2 and expect in err and err.count("\n") == 1 and "command-line overrides" in err
     assert not out.exists()
+
+
+def test_the_objective_with_its_gradient_has_the_plain_objectives_value_gradient_and_hessian():
+    """``_with_gradient`` (BFGS's objective, its derivative computed with its value in forward mode) gives
+    the same value, gradient and second derivative (reverse over its forward rule) as the function it
+    wraps, at a fixed point of a non-quadratic function of three variables with a pytree of arguments;
+    a derivative in the arguments is refused."""
+    from optimise._search import _with_gradient
+
+    def f(u, args):
+        a, (b,) = args
+        return jnp.sum(a * jnp.sin(u) ** 2) + b * jnp.prod(jnp.cos(u)) + jnp.dot(u, u) ** 1.5
+
+    g = _with_gradient(f)
+    u = jnp.asarray([0.3, -1.1, 2.0])
+    args = (jnp.asarray([1.0, 2.0, 0.5]), (jnp.asarray(0.7),))
+    assert float(g(u, args)) == pytest.approx(float(f(u, args)), rel=1e-12)
+    np.testing.assert_allclose(jax.grad(g)(u, args), jax.grad(f)(u, args), rtol=1e-10)
+    np.testing.assert_allclose(jax.jit(jax.value_and_grad(g))(u, args)[1], jax.grad(f)(u, args), rtol=1e-10)
+    np.testing.assert_allclose(jax.jacrev(jax.grad(g))(u, args), jax.hessian(f)(u, args), rtol=1e-8)
+    with pytest.raises(ValueError, match="in u only"):
+        jax.grad(lambda a: g(u, (a, args[1])))(args[0])
