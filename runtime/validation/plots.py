@@ -13,6 +13,7 @@ from matplotlib.colors import SymLogNorm
 
 from omnijax import Rig, world_to_image
 from omnijax.uncertainty import METHODS
+from runtime.figures import save
 
 from .theory import PtzMaps
 
@@ -69,8 +70,7 @@ def chroma_figure(maps: dict, path: Path, blue: float, sigma: float) -> None:
     for ax in axes:
         ax.set_xlabel("R (grey level)")
         ax.set_ylabel("G (grey level)")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path, dpi=110)
 
 
 def ptz_figure(maps: PtzMaps, rig: Rig, quantity: str, path: Path, min_distance: float) -> None:
@@ -119,8 +119,7 @@ def ptz_figure(maps: PtzMaps, rig: Rig, quantity: str, path: Path, min_distance:
     fig.suptitle(f"{QUANTITY_LABEL[quantity]} over the room's floor, in omni-image coordinates "
                  f"(+: omni axis; dashed: {min_distance:g} m around the PTZ's foot; grey: outside "
                  f"the room or non-positive)")
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save(fig, path, dpi=90)
 
 
 def positions_figure(rig: Rig, positions: np.ndarray, path: Path) -> None:
@@ -134,8 +133,7 @@ def positions_figure(rig: Rig, positions: np.ndarray, path: Path) -> None:
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title("Table 1 positions (person standing still), omni axis (+) and PTZ (o)")
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save(fig, path, dpi=100)
 
 
 def table1_figure(variants: dict[str, list[dict]], path: Path) -> None:
@@ -165,8 +163,7 @@ def table1_figure(variants: dict[str, list[dict]], path: Path) -> None:
             ax.grid(True, which="both", axis="y", alpha=0.3)
             if row_i == 0 and col == 0:
                 ax.legend(fontsize=8, loc="best")
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save(fig, path, dpi=100)
 
 
 def containment_figure(curve: list[dict], path: Path) -> None:
@@ -193,5 +190,4 @@ def containment_figure(curve: list[dict], path: Path) -> None:
     bx.set_title("what the zoom gives: face pixels")
     bx.legend()
     bx.grid(alpha=0.3)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save(fig, path, dpi=100)
