@@ -12,7 +12,6 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from omnijax import GLOBAL_NAMES, PARAM_UNITS, Observations, RigFit, RimEdges, RimFit
-from runtime.figures import save
 
 
 def rim_figure(gray: np.ndarray, rim: RimFit, edges: RimEdges, path: Path, file_circle=None) -> None:
@@ -39,7 +38,8 @@ def rim_figure(gray: np.ndarray, rim: RimFit, edges: RimEdges, path: Path, file_
     ax.legend(loc="lower left", fontsize=8, framealpha=0.8)
     ax.set_title("rim fit")
     fig.tight_layout()
-    save(fig, path, dpi=110)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def residual_figure(fit: RigFit, obs: Observations, path: Path, rim: RimFit | None = None,
@@ -75,7 +75,8 @@ def residual_figure(fit: RigFit, obs: Observations, path: Path, rim: RimFit | No
         ax.set_ylabel("edge point - circle (px)")
         ax.set_title(f"rim: residual scale {float(rim.scale):.2f} px, {int(rim.inliers)} inliers")
     fig.tight_layout()
-    save(fig, path, dpi=110)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def sigma_figure(by_positions: list[dict], assumed: dict[str, float], path: Path) -> None:
@@ -102,4 +103,5 @@ def sigma_figure(by_positions: list[dict], assumed: dict[str, float], path: Path
     ax_m.set_title("lengths")
     ax_a.set_title("angles")
     fig.tight_layout()
-    save(fig, path, dpi=110)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

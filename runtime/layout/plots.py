@@ -16,7 +16,6 @@ import numpy as np
 
 from omnijax import Rig
 from optimise import FloorGrid, FloorValues, SearchResult, place
-from runtime.figures import save
 from runtime.validation.plots import draw_rig
 
 #: Per-point quantity shown by each map, its label and how it is scaled.
@@ -101,7 +100,8 @@ def floor_figure(grid: FloorGrid, rig: Rig, result: SearchResult, quantities: li
                  f"red: operational region (p_contain met, face >= {float(rig.layout.face_target_px):g} px); "
                  f"dashed: {float(rig.layout.near_radius):g} m around the PTZ's foot, left out; grey: outside the "
                  "room or left out; +: omni axis", fontsize=10)
-    save(fig, path, dpi=80)
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
 
 
 def _panel_axes(result: SearchResult) -> list[str]:
@@ -180,7 +180,8 @@ def landscape_figure(result: SearchResult, rig: Rig, path: Path) -> None:
     keys = "x: where each start ended; dashed: H_p - R_h" if len(shown) == 2 else "dashed: the layouts marked"
     fig.suptitle(f"landscape: {result.evaluations['landscape_layouts']} layouts x "
                  f"{result.evaluations['floor_points']} floor points{note}; {keys}", fontsize=10)
-    save(fig, path, dpi=80)
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
 
 
 def _draw_room(ax, rig: Rig, colour: str = "w") -> None:
@@ -248,7 +249,8 @@ def cameras_figure(grid: FloorGrid, rig: Rig, result, path: Path) -> None:
                  f"camera's (black: where the best camera changes; red: framed region, {100 * s['framing']:.0f} % "
                  f"of the floor)\n{objective} {rig.layout.statistic} over the floor of the best camera: "
                  f"{result.objective:.4g}", fontsize=10)
-    save(fig, path, dpi=80)
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
 
 
 def _camera(fv: FloorValues, i: int) -> FloorValues:
@@ -276,4 +278,5 @@ def marginal_gain_figure(rows: list[dict], rig: Rig, units: str, path: Path) -> 
         ax.set_xlabel("PTZ cameras")
         ax.grid(alpha=0.3)
     fig.suptitle("marginal gain of each added PTZ camera (each k optimised on its own)", fontsize=10)
-    save(fig, path, dpi=80)
+    fig.savefig(path, dpi=80)
+    plt.close(fig)

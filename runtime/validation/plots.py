@@ -13,7 +13,6 @@ from matplotlib.colors import SymLogNorm
 
 from omnijax import Rig, world_to_image
 from omnijax.uncertainty import METHODS
-from runtime.figures import save
 
 from .theory import PtzMaps
 
@@ -70,7 +69,8 @@ def chroma_figure(maps: dict, path: Path, blue: float, sigma: float) -> None:
     for ax in axes:
         ax.set_xlabel("R (grey level)")
         ax.set_ylabel("G (grey level)")
-    save(fig, path, dpi=110)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def ptz_figure(maps: PtzMaps, rig: Rig, quantity: str, path: Path, min_distance: float) -> None:
@@ -119,7 +119,8 @@ def ptz_figure(maps: PtzMaps, rig: Rig, quantity: str, path: Path, min_distance:
     fig.suptitle(f"{QUANTITY_LABEL[quantity]} over the room's floor, in omni-image coordinates "
                  f"(+: omni axis; dashed: {min_distance:g} m around the PTZ's foot; grey: outside "
                  f"the room or non-positive)")
-    save(fig, path, dpi=90)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
 
 
 def positions_figure(rig: Rig, positions: np.ndarray, path: Path) -> None:
@@ -133,7 +134,8 @@ def positions_figure(rig: Rig, positions: np.ndarray, path: Path) -> None:
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title("Table 1 positions (person standing still), omni axis (+) and PTZ (o)")
-    save(fig, path, dpi=100)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
 
 
 def table1_figure(variants: dict[str, list[dict]], path: Path) -> None:
@@ -163,7 +165,8 @@ def table1_figure(variants: dict[str, list[dict]], path: Path) -> None:
             ax.grid(True, which="both", axis="y", alpha=0.3)
             if row_i == 0 and col == 0:
                 ax.legend(fontsize=8, loc="best")
-    save(fig, path, dpi=100)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
 
 
 def containment_figure(curve: list[dict], path: Path) -> None:
@@ -190,4 +193,5 @@ def containment_figure(curve: list[dict], path: Path) -> None:
     bx.set_title("what the zoom gives: face pixels")
     bx.legend()
     bx.grid(alpha=0.3)
-    save(fig, path, dpi=100)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
