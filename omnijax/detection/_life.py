@@ -169,6 +169,9 @@ class Evidence(eqx.Module):
     edge_before: Float[Array, "K 2"]
     samples: Float[Array, "K 2"]
     person_before: Float[Array, "K 2"] | None = None
+    #: per side, the edge now between the side's inside samples and the *other* side's flanks (averaged as
+    #: ``edge_now``; None: not measured): whether what is inside now continues what adjoins the other side
+    cross_now: Float[Array, "K 2"] | None = None
 
 
 def verdicts(ev: Evidence, trusted: Bool[Array, " K"], edge, faint: Bool[Array, " K"] | None = None
@@ -194,9 +197,20 @@ def verdicts(ev: Evidence, trusted: Bool[Array, " K"], edge, faint: Bool[Array, 
     none_now = ev.edge_now < jnp.where(wide, WIDE_NONE * edge, edge)
     ghost_side = none_now & (ev.edge_before > ratio * ev.edge_now)
     before = ev.edge_before if ev.person_before is None else ev.person_before
-    person = jnp.any((ev.edge_now >= edge) & (ev.edge_now > GHOST_RATIO * before), axis=-1)
+    person_side = (ev.edge_now >= edge) & (ev.edge_now > GHOST_RATIO * before)
+    sure_side = (ev.edge_now < edge) & (ev.edge_before >= edge) & (ev.edge_before > GHOST_RATIO * ev.edge_now)
+    if ev.cross_now is not None:
+        # a new edge on a side where the background had an edge already (something adjoins it), whose
+        # inside now continues what lies beyond the other side, where that side shows both signs of a
+        # ghost, is the floor showing again against what adjoins this side, not a person: a stander's
+        # body re-learnt beside a cupboard of nearly their colour (an edge of 10.5 before) gave the
+        # floor's edge against the cupboard as new, and the ghost was kept to the clip's end (six_people
+        # 9451: 97 frames). Someone standing against a table of their colour is the mirror image but for
+        # that: their open side had no edge in the background (the floor beside the floor)
+        adjoined = ev.edge_before >= edge
+        person_side = person_side & ~(adjoined & sure_side[:, ::-1] & (ev.cross_now < edge))
+    person = jnp.any(person_side, axis=-1)
     if faint is not None:
-        sure_side = (ev.edge_now < edge) & (ev.edge_before >= edge) & (ev.edge_before > GHOST_RATIO * ev.edge_now)
         person = person & ~(faint & jnp.any(sure_side, axis=-1))
     return jnp.any(ghost_side, axis=-1) & ~person, person
 
@@ -229,18 +243,34 @@ def ghost_evidence(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBa
     changed = (d2 > CHANGED) & ok
     sigma = lines.sigma
 
-    def side(edge_line, out):
-        """(now, before, measured) at each radius for the edge at ``edge_line`` (K,), outward ``out`` (+-1):
-        the sample inside it against the samples outside it."""
+    def geometry(edge_line, out):
+        """The inside samples (K, R) of the edge at ``edge_line`` (K,), outward ``out`` (+-1), its flank
+        samples (K, F, R) and which flanks count."""
         a = (edge_line[:, None] - out * jnp.minimum(inner[None], width[:, None] // 2)) % T  # (K, R)
         b = (edge_line[:, None, None] + out * flank[None]) % T  # (K, F, R)
+        rb = jnp.broadcast_to(r, b.shape)
+        # a flank sample inside another person's region shows that person, not what adjoins this one's side:
+        # a faint ghost beside someone standing took their body for its own edge now (standing_start 9263)
+        return a, b, ok[b, rb] & ~_elsewhere(dets, b, rb, T)
+
+    def across(a, b, flank_ok):
+        """The least d^2 now between the inside samples ``a`` and the flanks ``b`` (K, R)."""
+        rr, rb = jnp.broadcast_to(r, a.shape), jnp.broadcast_to(r, b.shape)
+        sig = jnp.broadcast_to(sigma[a, rr][:, None], b.shape)
+        inside = jnp.broadcast_to(cur[a, rr][:, None], (*b.shape, 3))
+        ones = jnp.ones(b.shape, jnp.float32)
+        if detector.light_axis is None:
+            d = change_measure(inside, cur[b, rb], ones, sig)
+        else:
+            d = change_across_light(inside, cur[b, rb], ones, sig, detector.light_axis)
+        return jnp.min(jnp.where(flank_ok, d, jnp.inf), axis=1)
+
+    def side(a, b, flank_ok):
+        """(now, before, measured, judged) at each radius for the edge whose inside samples are ``a`` and
+        flanks ``b``: the sample inside it against the samples outside it."""
         rr = jnp.broadcast_to(r, a.shape)
         rb = jnp.broadcast_to(r, b.shape)
         sig = jnp.broadcast_to(sigma[a, rr][:, None], b.shape)
-
-        # a flank sample inside another person's region shows that person, not what adjoins this one's side:
-        # a faint ghost beside someone standing took their body for its own edge now (standing_start 9263)
-        flank_ok = ok[b, rb] & ~_elsewhere(dets, b, rb, T)
 
         def least(colours, var_factor):
             inside = jnp.broadcast_to(colours[a, rr][:, None], (*b.shape, 3))
@@ -271,12 +301,16 @@ def ghost_evidence(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBa
     # each side on its own (see verdicts): taking the two sides radius by radius let a side against
     # furniture speak for the radii where only it was measured (three_people 8810: a ghost of the
     # learning kept all clip, edge now 30 from the table beside it, about 1 on its open side)
-    sides = [side(first, -1), side(last, 1)]
+    left, right = geometry(first, -1), geometry(last, 1)
+    sides = [side(*left), side(*right)]
     (now_l, before_l, n_l), (now_r, before_r, n_r) = (_side_means(*s[:3]) for s in sides)
     person_before = [_side_means(now, judged, measured)[1] for now, _, measured, judged in sides]
+    # each side's inside against the other side's flanks (verdicts: the floor showing again beside a ghost)
+    cross = [_side_means(c, c, measured)[0] for c, measured in
+             ((across(left[0], *right[1:]), sides[0][2]), (across(right[0], *left[1:]), sides[1][2]))]
     return Evidence(edge_now=jnp.stack([now_l, now_r], -1), edge_before=jnp.stack([before_l, before_r], -1),
                     samples=jnp.stack([n_l, n_r], -1).astype(jnp.float32),
-                    person_before=jnp.stack(person_before, -1))
+                    person_before=jnp.stack(person_before, -1), cross_now=jnp.stack(cross, -1))
 
 
 def _spacing(detector: Detector) -> Float[Array, " R"]:

@@ -602,8 +602,35 @@ def test_a_ghost_beside_someone_standing_does_not_take_their_body_for_its_edge(p
         ghost, person = verdicts(ev, jnp.zeros(dets.valid.shape, bool), 6.0)
         if theirs:  # the stander is someone's detection: the left side is not measured against them
             assert float(ev.samples[k, 0]) == 0 and bool(ghost[k]) and not bool(person[k])
-        else:  # nobody's: the body beyond the left edge reads as this detection's edge now
-            assert float(ev.edge_now[k, 0]) > 50 and bool(person[k]) and not bool(ghost[k])
+        else:  # nobody's: the body beyond the left edge reads as an edge now on the left, but what is
+            # inside now continues the floor beyond the open right side (both signs of a ghost there)
+            assert float(ev.edge_now[k, 0]) > 50 and float(ev.cross_now[k, 0]) < 6.0
+            assert bool(ghost[k]) and not bool(person[k])
+            blind = eqx.tree_at(lambda e: e.cross_now, ev, None)  # without that test, the body vetoed it
+            ghost, person = verdicts(blind, jnp.zeros(dets.valid.shape, bool), 6.0)
+            assert bool(person[k]) and not bool(ghost[k])
+
+
+def test_a_new_edge_against_what_adjoins_a_ghost_is_no_person_where_the_floor_shows_again():
+    """six_people 9451 (the sides' figures measured there, frame 599): an untrusted stander's body was
+    re-learnt beside a cupboard of nearly their colour and stayed in the background after they left.
+    Its open side: no edge now (0.4) against their body's edge before (44.4), both signs of a ghost; its
+    other side: the floor now against the cupboard, 55, where the body against the cupboard showed 10.5
+    before, a "person's edge" that kept the ghost to the clip's end (97 frames). What is inside now
+    continues the floor beyond the open side (2): no person, a ghost. Someone standing against the
+    cupboard beside their own ghost differs from that floor too (80): a person. Without a sure ghost on
+    the other side (a person's own edge before there, or an edge now) the new edge stays a person's, and
+    so it does where the background had no edge on its side (2 before: a new edge on bare floor, as of
+    someone standing against a table of their colour, whose table side is the mirror of this ghost's)."""
+    from omnijax.detection import Evidence
+
+    ev = Evidence(edge_now=jnp.array([[0.4, 55.0], [0.4, 55.0], [7.0, 55.0], [0.4, 55.0]]),
+                  edge_before=jnp.array([[44.4, 10.5], [44.4, 10.5], [44.4, 10.5], [44.4, 2.0]]),
+                  samples=jnp.array([[20.0, 17.0]] * 4),
+                  cross_now=jnp.array([[1.0, 2.0], [1.0, 80.0], [1.0, 2.0], [1.0, 2.0]]))
+    for trusted in (False, True):
+        g, p = (np.asarray(v) for v in verdicts(ev, jnp.full(4, trusted), 6.0))
+        assert g.tolist() == [True, False, False, False] and p.tolist() == [False, True, True, True]
 
 
 def test_a_sure_ghost_is_set_aside_for_the_life_and_a_person_is_not(paper_detector, room):
