@@ -253,35 +253,28 @@ def ghost_evidence(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBa
         # a faint ghost beside someone standing took their body for its own edge now (standing_start 9263)
         return a, b, ok[b, rb] & ~_elsewhere(dets, b, rb, T)
 
-    def across(a, b, flank_ok):
-        """The least d^2 now between the inside samples ``a`` and the flanks ``b`` (K, R)."""
+    def least(a, b, flank_ok, colours, var_factor):
+        """The least d^2 between the inside samples ``a`` (K, R) and the flanks ``b`` (K, F, R) that count,
+        in ``colours`` (the frame's or the background's) with the flanks' ``var_factor``."""
         rr, rb = jnp.broadcast_to(r, a.shape), jnp.broadcast_to(r, b.shape)
         sig = jnp.broadcast_to(sigma[a, rr][:, None], b.shape)
-        inside = jnp.broadcast_to(cur[a, rr][:, None], (*b.shape, 3))
-        ones = jnp.ones(b.shape, jnp.float32)
+        inside = jnp.broadcast_to(colours[a, rr][:, None], (*b.shape, 3))
         if detector.light_axis is None:
-            d = change_measure(inside, cur[b, rb], ones, sig)
-        else:
-            d = change_across_light(inside, cur[b, rb], ones, sig, detector.light_axis)
+            d = change_measure(inside, colours[b, rb], var_factor[b, rb], sig)
+        else:  # the lights' own gradients (a lamp's pool of another colour) are no object's edge
+            d = change_across_light(inside, colours[b, rb], var_factor[b, rb], sig, detector.light_axis)
         return jnp.min(jnp.where(flank_ok, d, jnp.inf), axis=1)
+
+    once = jnp.ones_like(lines.var_factor)  # the frame: one frame's estimate
 
     def side(a, b, flank_ok):
         """(now, before, measured, judged) at each radius for the edge whose inside samples are ``a`` and
         flanks ``b``: the sample inside it against the samples outside it."""
         rr = jnp.broadcast_to(r, a.shape)
         rb = jnp.broadcast_to(r, b.shape)
-        sig = jnp.broadcast_to(sigma[a, rr][:, None], b.shape)
 
-        def least(colours, var_factor):
-            inside = jnp.broadcast_to(colours[a, rr][:, None], (*b.shape, 3))
-            if detector.light_axis is None:
-                d = change_measure(inside, colours[b, rb], var_factor[b, rb], sig)
-            else:  # the lights' own gradients (a lamp's pool of another colour) are no object's edge
-                d = change_across_light(inside, colours[b, rb], var_factor[b, rb], sig, detector.light_axis)
-            return jnp.min(jnp.where(flank_ok, d, jnp.inf), axis=1)
-
-        now = least(cur, jnp.ones_like(lines.var_factor))
-        before = least(lines.mean, lines.var_factor)
+        now = least(a, b, flank_ok, cur, once)
+        before = least(a, b, flank_ok, lines.mean, lines.var_factor)
         measured = changed[a, rr] & radial & ~_elsewhere(dets, a, rr, T)
         # eq 5: chromaticity's noise grows as the light falls, so the d^2 of a pair is as small as its darker
         # sample is dark. Where the background's pair is more than sqrt(GHOST_RATIO) times darker than the
@@ -306,8 +299,10 @@ def ghost_evidence(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBa
     (now_l, before_l, n_l), (now_r, before_r, n_r) = (_side_means(*s[:3]) for s in sides)
     person_before = [_side_means(now, judged, measured)[1] for now, _, measured, judged in sides]
     # each side's inside against the other side's flanks (verdicts: the floor showing again beside a ghost)
-    cross = [_side_means(c, c, measured)[0] for c, measured in
-             ((across(left[0], *right[1:]), sides[0][2]), (across(right[0], *left[1:]), sides[1][2]))]
+    cross = []
+    for (a, _, _), (_, b, flank_ok), (_, _, measured, _) in ((left, right, sides[0]), (right, left, sides[1])):
+        c = least(a, b, flank_ok, cur, once)
+        cross.append(_side_means(c, c, measured)[0])
     return Evidence(edge_now=jnp.stack([now_l, now_r], -1), edge_before=jnp.stack([before_l, before_r], -1),
                     samples=jnp.stack([n_l, n_r], -1).astype(jnp.float32),
                     person_before=jnp.stack(person_before, -1), cross_now=jnp.stack(cross, -1))
