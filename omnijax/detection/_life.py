@@ -697,8 +697,11 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
     # the last third's minority (learn_background's last candidate): what the spot showed once someone
     # who stood there left
     last, last_n = gather_rgb(bg.minority[-1], idx), bg.minority_n[-1].reshape(-1)[idx]
-    for j in range(bg.minority.shape[0]):  # each candidate in turn, against the lines settled so far
-        minority, minority_n = gather_rgb(bg.minority[j], idx), bg.minority_n[j].reshape(-1)[idx]
+    # each candidate in turn, against the lines settled so far: one compiled body scanned over the
+    # candidates (unrolled, the three took 9.7 s of a cold demo start's 47 s of compiling; scanned, 6.6 s)
+    def settle(carry, candidate):
+        lines, took = carry
+        minority, minority_n = gather_rgb(candidate[0], idx), candidate[1].reshape(-1)[idx]
         has = (minority_n >= MINORITY_FRAMES) & ok & ~took
         composite = jnp.where(has[..., None], minority, lines.mean)
         d2 = jnp.where(ok, change_at(detector, composite, lines), 0.0)
@@ -710,8 +713,10 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
         take = regions(dets, floor, d2.shape) & has & (d2 > CHANGED) & nearer
         mean = jnp.where(take[..., None], minority, lines.mean)
         var_factor = jnp.where(take, 1.0 / jnp.maximum(minority_n, 1.0), lines.var_factor)
-        lines, took = lines_from(mean, var_factor, lines.sigma), took | take
-    return lines, took
+        settled = lines_from(mean, var_factor, lines.sigma)
+        return (jax.tree.map(lambda a, b: a.astype(b.dtype), settled, lines), took | take), None
+
+    return lax.scan(settle, (lines, took), (bg.minority, bg.minority_n))[0]
 
 
 def learned_share(detector: Detector, life: Life, frames: float) -> Array:
