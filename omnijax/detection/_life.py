@@ -698,7 +698,7 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
     # who stood there left
     last, last_n = gather_rgb(bg.minority[-1], idx), bg.minority_n[-1].reshape(-1)[idx]
     # each candidate in turn, against the lines settled so far: one compiled body scanned over the
-    # candidates (unrolled, the three took 9.7 s of a cold demo start's 47 s of compiling; scanned, 6.6 s)
+    # candidates (unrolled, the three took 10.9 s of a cold demo start's 48.9 s of compiling; scanned, 7.1 s)
     def settle(carry, candidate):
         lines, took = carry
         minority, minority_n = gather_rgb(candidate[0], idx), candidate[1].reshape(-1)[idx]
@@ -714,7 +714,7 @@ def settle_learning(detector: Detector, lines: LineBackground, bg: Background, e
         mean = jnp.where(take[..., None], minority, lines.mean)
         var_factor = jnp.where(take, 1.0 / jnp.maximum(minority_n, 1.0), lines.var_factor)
         settled = lines_from(mean, var_factor, lines.sigma)
-        return (jax.tree.map(lambda a, b: a.astype(b.dtype), settled, lines), took | take), None
+        return (settled, took | take), None
 
     return lax.scan(settle, (lines, took), (bg.minority, bg.minority_n))[0]
 
