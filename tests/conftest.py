@@ -9,7 +9,7 @@ import tempfile
 
 # XLA's CPU compiler without its newer fusion emitters, for this process and every `omnijax` child it starts
 # (they inherit the environment): the suite is mostly compiling, and the older emitters compile the same
-# programs in about half the time (control_step 33.4 -> 17.0 s on one core of the 2-core CI machine;
+# programs in about half the time (control_step 33.4 -> 17.0 s on one core of this 2-core host;
 # the whole suite 516 -> 456 s back to back), to the same results. The CLI, the demo and the benchmarks
 # keep XLA's defaults: the newer emitters' code runs steps 1-3 of the detector faster (docs/runtime.md).
 # Read when JAX first uses the CPU, after this module is imported; a flag the caller set is kept.
