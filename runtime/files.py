@@ -16,10 +16,10 @@ import tomllib
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from omnijax.config import ConfigError, Rig, Zone, parse_rig
-from omnijax.detection import polar_range
+from omnijax.config import ConfigError
 
 if TYPE_CHECKING:
+    from omnijax.config import Rig, Zone
     from omnijax.world import Scenario
 
 
@@ -160,6 +160,9 @@ def load_rig(path: str | Path, overrides: dict[str, dict] | None = None,
 def build_rig(data: dict, source: str, read_text=None) -> Rig:
     """:func:`omnijax.parse_rig` of a parsed rig file, and refused (one line naming ``source``) if its omni
     camera cannot see its own room: every rig a command uses passes here, before any work."""
+    from omnijax.config import parse_rig  # here, not at the top: reading a PTZ profile needs no JAX
+    from omnijax.detection import polar_range
+
     rig = parse_rig(data, source=source, read_text=read_text)
     try:
         polar_range(rig)

@@ -25,7 +25,6 @@ from annotated_types import Len
 from pydantic import Field, model_validator
 
 from omnijax.config import Degrees, Section, validate, within
-from runtime.files import read_toml
 
 #: Where the shipped profiles live (``configs/devices`` of the checkout).
 DEVICES_DIR = Path(__file__).resolve().parents[2] / "configs" / "devices"
@@ -354,6 +353,8 @@ def resolve_profile_path(name_or_path: str | Path) -> Path:
 def load_profile(name_or_path: str | Path) -> DeviceProfile:
     """Read and validate a profile (see :func:`resolve_profile_path`)."""
     path = resolve_profile_path(name_or_path)
+    from runtime.files import read_toml  # here: runtime.files imports the rig, hence JAX, which the emulator needs not
+
     return parse_profile(read_toml(path, "device profile", ProfileError), source=str(path))
 
 
