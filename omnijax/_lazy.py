@@ -4,6 +4,7 @@ one light part (the PTZ emulator: the schema kit of :mod:`omnijax.config`) does 
 from __future__ import annotations
 
 import importlib
+import importlib.util
 from collections.abc import Callable, Mapping
 
 
@@ -14,10 +15,12 @@ def lazy_exports(package: str, table: Mapping[str, tuple[str, ...]]) -> tuple[Ca
     space = importlib.import_module(package).__dict__
 
     def __getattr__(name: str):
-        if name not in where:
-            raise AttributeError(f"module {package!r} has no attribute {name!r}")
-        value = space[name] = getattr(importlib.import_module(f"{package}.{where[name]}"), name)
-        return value
+        if name in where:
+            value = space[name] = getattr(importlib.import_module(f"{package}.{where[name]}"), name)
+            return value
+        if importlib.util.find_spec(f"{package}.{name}") is not None:  # a subpackage: `omnijax.world.X`
+            return importlib.import_module(f"{package}.{name}")
+        raise AttributeError(f"module {package!r} has no attribute {name!r}")
 
     def __dir__() -> list[str]:
         return sorted(set(space) | set(where))

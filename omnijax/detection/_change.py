@@ -98,11 +98,11 @@ def estimate_sensor_noise(frames: UInt8[ArrayLike, "N H W 3"], floor=0.5, pool: 
     return jnp.sqrt(jnp.maximum(var, jnp.asarray(floor, jnp.float32) ** 2))
 
 
-def _stepped_median(x: Float[Array, "..."], step: float, top: int) -> Float[Array, ""]:
+def _stepped_median(x: Float[ArrayLike, "..."], step: float, top: int) -> Float[Array, ""]:
     """``jnp.nanmedian(x)`` for values that are whole multiples of ``step`` in ``[0, top * step]``
     (NaN where missing), from the count of each multiple: exact, and one pass where the sort behind
     ``nanmedian`` took 0.36 s for a million samples on the CPU."""
-    k = jnp.round(jnp.nan_to_num(x, nan=-1.0) / step).astype(jnp.int32)
+    k = jnp.round(jnp.nan_to_num(jnp.asarray(x), nan=-1.0) / step).astype(jnp.int32)
     counts = jnp.zeros(top + 2, jnp.int32).at[jnp.where(k < 0, top + 1, jnp.minimum(k, top))].add(1)
     below = jnp.cumsum(counts[: top + 1])  # samples at or under each multiple
     m = below[-1]
