@@ -122,7 +122,10 @@ class Detections(eqx.Module):
     the person's run of lines; ``sigma_r_f``, ``sigma_theta_f`` their errors (:func:`_foot_sigmas`):
     the quality part, which the sigma rule scales, and ``bound_r_f``, ``bound_theta_f`` the bound
     part of a foot the detector could not see (the person reaches past the sampled radii), which it
-    adds as it is (:func:`omnijax.aiming.detection_sigmas`);
+    adds as it is (:func:`omnijax.aiming.detection_sigmas`); ``height_r_f`` (px per metre) how far
+    the foot's radius moves with the person's height above the prior's (a foot placed from the head
+    with the prior's height; 0 for a foot seen: :func:`_foot_sigmas`), so the aim's height prior errs
+    against it (:func:`omnijax.aiming.input_covariance`);
     ``contrast`` is the non-centrality per sample measured on the profile (over the samples no
     stronger person explained); ``r_in``/``r_out`` (px) the person's radial extent (the foot
     hypothesis's, or eq 12's where the foot moved out to a head seen in brightness alone,
@@ -143,6 +146,7 @@ class Detections(eqx.Module):
     sigma_theta_f: Float[Array, " K"]
     bound_r_f: Float[Array, " K"]
     bound_theta_f: Float[Array, " K"]
+    height_r_f: Float[Array, " K"]
     contrast: Float[Array, " K"]
     r_in: Float[Array, " K"]
     r_out: Float[Array, " K"]
@@ -203,14 +207,12 @@ def change_at(detector: Detector, cur: Float[Array, "T R 3"], lines: LineBackgro
 #: |error| median 0.37 rad, 90 % 0.75 rad; r_f error RMS 7.2 px against r_1 / sqrt(6) = 7.9 px;
 #: docs/detection.md, "Honest sigmas").
 BLIND_THETA_SIGMA = 0.5
-#: Foot hypotheses either side over which the slope d r_f / d out is taken (the table's outer ends are
-#: whole pixels).
-HEAD_SPAN = 4
 
 
 def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0,
-                 from_head=False) -> tuple[Array, Array, Array, Array]:
-    """``(sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f)`` of a detection whose foot hypothesis is ``i``.
+                 from_head=False) -> tuple[Array, Array, Array, Array, Array]:
+    """``(sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f, height_r_f)`` of a detection whose foot
+    hypothesis is ``i``.
 
     One upright person's image is symmetric about the foot's azimuth, so the run's centre is
     unbiased and its error is where the two edges fall inside their lines' bins of width
@@ -240,8 +242,17 @@ def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0,
     eq 12's foot (``from_head``: shorter than the prior, legs that do not show or behind furniture),
     has their foot from the head's top and the prior's height (``from_head`` here covers both): a
     height ``sigma_H_p`` off moves the top ``dout/dH`` px and the foot with it, ``d r_f / d out`` px a
-    px (0.05-0.19 m on the floor from 1 to 3.8 m out in the paper's rig): a foot the detector did not
-    see, so a bound part too.
+    px (``PolarIndex.hyp_dr_f_dH``, by autodiff; 0.05-0.19 m on the floor from 1 to 3.8 m out in the
+    paper's rig): a foot the detector did not see, so a bound part too.
+
+    ``height_r_f`` (px per metre of the person's height above the prior's) is how the foot's error
+    follows the height: for a foot from the head, ``hyp_dr_f_dH``, the height part of its bound. The aim's height is the prior's too, wrong by the same amount the other way, so the two
+    errors are correlated, not independent (:func:`omnijax.aiming.input_covariance`); on the fisheye rig
+    they cancel in the tilt by a half and more (docs/validation.md). A seen foot's error follows the
+    height less (eq 12's window has the prior's length; the regression on Table 1's trials is 8-34 px a
+    metre against 106-120 from the head on the fisheye rig) and is not coupled: 0. (The foot's Monte
+    Carlo puts it at about half the head's slope, twice what the trials show, and narrowed the tilt's
+    prediction to a singular one.)
     """
     polar = detector.polar
     step = 2 * jnp.pi / polar.n_theta
@@ -258,13 +269,12 @@ def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0,
     # under the camera: the foot uniform over the blind disc of image radius r_1 (the first hypothesis's),
     # reported at r_1: E[(r_1 - r)^2] = r_1^2 / 6; at the image's edge: anywhere along the extent
     bound_r = jnp.where(blind, polar.hyp_r_f[i] / jnp.sqrt(6.0), jnp.where(edge, extent / jnp.sqrt(12.0), 0.0))
-    n = polar.hyp_out.shape[0] - 1
-    a, b = jnp.clip(i - HEAD_SPAN, 0, n), jnp.clip(i + HEAD_SPAN, 0, n)  # slopes over a few hypotheses
-    dr_f_dout = (polar.hyp_r_f[b] - polar.hyp_r_f[a]) / jnp.maximum(polar.hyp_out[b] - polar.hyp_out[a], 1)
-    height = detector.sigma_H_p * polar.hyp_dout_dH[i] * dr_f_dout
+    dr_f_dH = polar.hyp_dr_f_dH[i]
+    height = detector.sigma_H_p * dr_f_dH
     bound_r = jnp.where(from_head, jnp.sqrt(bound_r**2 + height**2), bound_r)
     bound_theta = jnp.where(blind, BLIND_THETA_SIGMA, 0.0)
-    return sigma_r, sigma_theta, bound_r, bound_theta
+    height_r_f = jnp.where(from_head, dr_f_dH, 0.0)
+    return sigma_r, sigma_theta, bound_r, bound_theta, height_r_f
 
 
 def find_sectors(detector: Detector, M: Float[Array, " T"]):
@@ -293,8 +303,8 @@ def detections_of(detector: Detector, people: People, d2: Float[Array, "T R"]) -
     i = jnp.where(jnp.any(two, 1), i_own, foot)
     i_extent = jnp.where(jnp.any(two, 1), i_own, people.i)  # what the background's life reads the sides over
     width = (people.last - people.first + 1) * step
-    sigma_r, sigma_theta, bound_r, bound_theta = _foot_sigmas(detector, i, people.contrast, width, people.visible,
-                                                              people.head_only | people.from_head)
+    sigma_r, sigma_theta, bound_r, bound_theta, height_r_f = _foot_sigmas(
+        detector, i, people.contrast, width, people.visible, people.head_only | people.from_head)
     first = polar.hyp_first
     xy = floor(i)
     person = a_person(polar, people, i)
@@ -302,7 +312,7 @@ def detections_of(detector: Detector, people: People, d2: Float[Array, "T R"]) -
     strip = merge_fragments(people.valid, xy, i == first, polar.hyp_R[first]) & ~person
     return Detections(
         valid=valid, r_f=polar.hyp_r_f[i], theta_f=theta_f, sigma_r_f=sigma_r, sigma_theta_f=sigma_theta,
-        bound_r_f=bound_r, bound_theta_f=bound_theta,
+        bound_r_f=bound_r, bound_theta_f=bound_theta, height_r_f=height_r_f,
         contrast=people.contrast, r_in=polar.radii[i_extent], r_out=polar.radii[0] + polar.hyp_out[i_extent],
         theta_l=wrap_2pi(people.first * step), theta_r=wrap_2pi(people.last * step), peak=people.excess,
         region=people.explained, strip=strip,

@@ -54,6 +54,9 @@ class PolarIndex(eqx.Module):
     hyp_r_f: Float[Array, " R"]
     hyp_R: Float[Array, " R"]
     hyp_dout_dH: Float[Array, " R"]
+    #: per foot hypothesis, how far (px) the foot that the head's top places with the prior's height moves a
+    #: metre of the person's height (the outer end fixed): the height part of a foot from the head
+    hyp_dr_f_dH: Float[Array, " R"]
     hyp_width: Float[Array, " R"]
     #: per line, the samples that count (``line_ok``) in its psi2 window at each radius, summed along the
     #: radii with a leading 0 (:func:`~omnijax.detection.window_count_prefix`): a foot hypothesis's
@@ -130,7 +133,9 @@ def _range_radii(rig: Rig, R_far):
 def _geometry_tables(rig: Rig, radii, theta):
     """Pixels of the line samples; per radius: floor radius, and the outer end, the shoulders (on
     the axis) and the axis-foot radius of a person whose inner end, as the psi2 window sees it, is
-    there.
+    there; the outer end's derivative in the person's height, and that of the axis foot placed
+    from the outer end with the prior's height (``d r_f / d H`` at a fixed outer end: a taller
+    person's top is farther out, so is the foot the prior's height puts under it), by autodiff.
 
     Two distances from the inner end to the axis. The person's image as the window sees it (its
     outer end, its azimuth span) is that of a body whose round base starts, on average over the
@@ -149,9 +154,13 @@ def _geometry_tables(rig: Rig, radii, theta):
     r_out, dout_dH = jax.jvp(outer, (rig.person.H_p,), (jnp.ones_like(rig.person.H_p),))
     width = 2 * jnp.arcsin(jnp.minimum(rho / R_seen, 1.0))  # a vertical cylinder's azimuth span
     R_axis = R_floor + rho
-    r_f = point_image_radius(R_axis, 0.0, omni.r_m, omni.H_o, omni.profile)
+    foot = lambda R: point_image_radius(R, 0.0, omni.r_m, omni.H_o, omni.profile)
+    r_f, dr_f_dR = jax.jvp(foot, (R_axis,), (jnp.ones_like(R_axis),))
+    dout_dR = jax.jvp(lambda R: person_image_extent(R, omni, rig.person.H_p, rig.person.R_h, rho)[1],
+                      (R_seen,), (jnp.ones_like(R_seen),))[1]
+    dr_f_dH = dout_dH / dout_dR * dr_f_dR
     r_head = point_image_radius(R_axis, SHOULDER * rig.person.H_p, omni.r_m, omni.H_o, omni.profile)
-    return x, y, R_floor, r_out, r_head, r_f, dout_dH, width, R_axis
+    return x, y, R_floor, r_out, r_head, r_f, dout_dH, dr_f_dH, width, R_axis
 
 
 def build_polar_index(rig: Rig) -> PolarIndex:
@@ -164,7 +173,7 @@ def build_polar_index(rig: Rig) -> PolarIndex:
     theta = 2 * np.pi * np.arange(det.n_theta) / det.n_theta
 
     tables = _geometry_tables(rig, jnp.asarray(radii), jnp.asarray(theta))
-    x, y, R_floor, r_out, r_head, hyp_r_f, dout_dH, hyp_width, hyp_R = (np.asarray(v) for v in tables)
+    x, y, R_floor, r_out, r_head, hyp_r_f, dout_dH, dr_f_dH, hyp_width, hyp_R = (np.asarray(v) for v in tables)
     xi, yi = np.rint(x).astype(np.int64), np.rint(y).astype(np.int64)
     inside = (xi >= 0) & (xi < W_img) & (yi >= 0) & (yi < H_img)
     flat = np.where(inside, yi * W_img + xi, 0)
@@ -194,6 +203,7 @@ def build_polar_index(rig: Rig) -> PolarIndex:
         hyp_out=jnp.asarray(np.minimum(hyp_out, n_r), dtype=jnp.int32),
         hyp_head=jnp.asarray(np.minimum(hyp_head, n_r), dtype=jnp.int32), hyp_ok=jnp.asarray(hyp_ok),
         hyp_r_f=jnp.asarray(hyp_r_f), hyp_R=jnp.asarray(hyp_R), hyp_dout_dH=jnp.asarray(dout_dH),
+        hyp_dr_f_dH=jnp.asarray(dr_f_dH),
         hyp_width=jnp.asarray(hyp_width), image_size=(W_img, H_img), window_reach=int(window_lines.max()),
         person_half_lines=float(0.5 * hyp_width[hyp_ok].max() * det.n_theta / (2 * np.pi)) if hyp_ok.any() else 0.0,
     )

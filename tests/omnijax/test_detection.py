@@ -405,12 +405,12 @@ def test_a_person_dressed_like_the_floor_is_found_by_their_head(paper_detector, 
     assert float(d.contrast[k]) < CONTRAST_FACTOR * float(det.thresholds.c_min)  # the case: not by the whole
     assert float(d.r_f[k]) == pytest.approx(float(polar.hyp_r_f[i]), abs=1.5)
     assert math.remainder(float(d.theta_f[k]) - 100 * step, 2 * math.pi) == pytest.approx(0.0, abs=0.02)
-    # the foot from the head's top: the prior height's spread is in its sigma, the top moving dout/dH px
-    # a metre of height, the foot with it (central differences of the tables)
-    r_f, out = np.asarray(polar.hyp_r_f), np.asarray(polar.hyp_out)
-    slope = (r_f[i + 4] - r_f[i - 4]) / (out[i + 4] - out[i - 4])
-    want = float(det.sigma_H_p) * float(polar.hyp_dout_dH[i]) * slope
+    # the foot from the head's top: the prior height's spread is in its sigma, the top moving with the
+    # height and the foot with it (the polar's hyp_dr_f_dH: against the exact person model in
+    # test_a_foot_from_the_head_carries_its_height_coupling), and its coupling to the height
+    want = float(det.sigma_H_p) * float(polar.hyp_dr_f_dH[i])
     assert float(d.bound_r_f[k]) == pytest.approx(want, rel=1e-6) and want > 1.0
+    assert float(d.height_r_f[k]) == pytest.approx(float(polar.hyp_dr_f_dH[i]), rel=1e-12)
     narrow = int(np.floor(0.5 * (HEAD_RUN_WIDTHS * float(polar.hyp_width[i]) / step - 1)))  # 2 narrow + 1 lines
     ks, d = found(30.0, narrow)
     assert ks == [] and bool(np.any(np.asarray(d.strip)))
@@ -485,11 +485,8 @@ def test_a_foot_placed_by_the_head_carries_the_height_prior_in_its_sigma(paper_d
         top = int(round(out[i] - sigmas * float(det.sigma_H_p) * float(polar.hyp_dout_dH[i])))
         return _one_person_on_a_table(det, i, [(start, top, 8.0 * c_min)])
 
-    # the height's spread as it moves the foot: sigma_H_p dout/dH px of the top, d r_f / d out a px of it
-    # (the detector takes the slopes over a few hypotheses either side of the foot)
-    slope = lambda j: (r_f[j + 4] - r_f[j - 4]) / (out[j + 4] - out[j - 4])
-    height = lambda foot: (lambda j: float(det.sigma_H_p) * float(polar.hyp_dout_dH[j]) * slope(j))(
-        int(np.argmin(np.abs(r_f - foot))))
+    # the height's spread as it moves the foot from the head (the polar's d r_f / d H at a fixed top)
+    height = lambda foot: float(det.sigma_H_p) * float(polar.hyp_dr_f_dH[int(np.argmin(np.abs(r_f - foot)))])
     truth = float(r_f[i])
     foot, bound = found(0.0)
     assert foot == pytest.approx(truth, abs=1.5) and bound == 0.0  # the prior's height: the change starts there
@@ -711,12 +708,12 @@ def test_foot_sigmas_cover_the_failure_modes(paper_detector):
     extent = float(polar.hyp_out[i] - i)
     for width, theta_var, share in ((one, 0.0, 0.0), (one + step + 0.1, 0.1**2 / 4, 0.1 / one),
                                     (one - step - 0.05, 0.05**2 / 12, 0.05 / one)):
-        s_r, s_t, b_r, b_t = _foot_sigmas(paper_detector, jnp.asarray(i), jnp.asarray(contrast), jnp.asarray(width))
+        s_r, s_t, b_r, b_t, _ = _foot_sigmas(paper_detector, jnp.asarray(i), jnp.asarray(contrast), jnp.asarray(width))
         assert float(s_t) == pytest.approx(math.sqrt(step**2 / 24 + theta_var), rel=1e-9)
         assert float(s_r) == pytest.approx(math.sqrt(mc**2 + share * extent**2 / 12), rel=1e-6)
         assert float(b_r) == 0.0 and float(b_t) == 0.0
     for edge, blind in ((int(ok[0]), True), (int(ok[-1]), False)):
-        s_r, _, b_r, b_t = _foot_sigmas(paper_detector, jnp.asarray(edge), jnp.asarray(contrast),
+        s_r, _, b_r, b_t, _ = _foot_sigmas(paper_detector, jnp.asarray(edge), jnp.asarray(contrast),
                                         jnp.asarray(float(polar.hyp_width[edge])))
         m = float(foot_sigma_lookup(paper_detector.foot_sigma, edge, contrast))
         assert float(s_r) == pytest.approx(m, rel=1e-6)
@@ -800,3 +797,32 @@ def test_later_passes_recompute_only_a_band_of_lines(paper_detector, monkeypatch
     for f in ("valid", "i", "first", "last", "explained"):
         np.testing.assert_array_equal(np.asarray(getattr(band, f)), np.asarray(getattr(full, f)))
     np.testing.assert_allclose(np.asarray(band.excess), np.asarray(full.excess), rtol=1e-4)
+
+
+def test_a_foot_from_the_head_carries_its_height_coupling(paper_detector, paper_rig):
+    """A foot placed from the head's top moves ``dout/dH * dr_f/dout`` px a metre of the person's height: the
+    detector's tables (slopes over a few hypotheses) against the exact person model inverted by bisection
+    (tests/omnijax/test_aim.py), at the polar's convention (the window sees the body from ``pi rho / 4``
+    before the axis), within 5 %; a foot seen is not coupled (0)."""
+    from omnijax import person_image_extent, point_image_radius
+    from omnijax.detection._detector import _foot_sigmas
+    from omnijax.detection._polar import body_radius
+
+    polar, o = paper_detector.polar, paper_rig.omni
+    rho, R_h, H_p = float(body_radius(paper_rig)), float(paper_rig.person.R_h), float(paper_rig.person.H_p)
+    outer = lambda R, H: float(person_image_extent(R - rho + 0.25 * math.pi * rho, o, H, R_h, rho)[1])
+
+    def placed(R, H):  # the axis foot's image radius of the prior-height person with this outer end
+        out, lo, hi = outer(R, H), 0.0, 20.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if outer(mid, H_p) > out else (mid, hi)
+        return float(point_image_radius(0.5 * (lo + hi), 0.0, o.r_m, o.H_o, o.profile))
+
+    for R in (1.5, 2.5, 3.5):
+        i = int(np.argmin(np.abs(np.asarray(polar.hyp_R) - R)))
+        R_i = float(polar.hyp_R[i])
+        exact = (placed(R_i, H_p + 1e-3) - placed(R_i, H_p - 1e-3)) / 2e-3
+        args = (paper_detector, jnp.asarray(i), jnp.asarray(50.0), jnp.asarray(float(polar.hyp_width[i])))
+        assert float(_foot_sigmas(*args, from_head=True)[4]) == pytest.approx(exact, rel=0.05), R
+        assert float(_foot_sigmas(*args, from_head=False)[4]) == 0.0
