@@ -246,12 +246,13 @@ def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0,
     paper's rig): a foot the detector did not see, so a bound part too.
 
     ``height_r_f`` (px per metre of the person's height above the prior's) is how the foot's error
-    follows the height: for a foot from the head, ``hyp_dr_f_dH``, the height part of its bound. The aim's height is the prior's too, wrong by the same amount the other way, so the two
-    errors are correlated, not independent (:func:`omnijax.aiming.input_covariance`); on the fisheye rig
-    they cancel in the tilt by a half and more (docs/validation.md). A seen foot's error follows the
-    height less (eq 12's window has the prior's length; the regression on Table 1's trials is 8-34 px a
-    metre against 106-120 from the head on the fisheye rig) and is not coupled: 0. (The foot's Monte
-    Carlo puts it at about half the head's slope, twice what the trials show, and narrowed the tilt's
+    follows the height: for a foot from the head, ``hyp_dr_f_dH``, the height part of its bound. The
+    aim's height is the prior's too, wrong by the same amount the other way, so the two errors are
+    correlated, not independent (:func:`omnijax.aiming.input_covariance`); on the fisheye rig they
+    cancel in the tilt by a half and more (docs/validation.md). A seen foot's error follows the height
+    less (eq 12's window has the prior's length; the regression on Table 1's trials is 8-34 px a metre
+    against 106-120 from the head on the fisheye rig) and is not coupled: 0. (The foot's Monte Carlo
+    puts it at about half the head's slope, twice what the trials show, and narrowed the tilt's
     prediction to a singular one.)
     """
     polar = detector.polar
