@@ -27,7 +27,7 @@ from ._lazy import lazy_exports
 # each public name, by the subpackage that defines it: imported when first read (omnijax._lazy)
 __getattr__, __dir__, __all__ = lazy_exports(__name__, {
     "aiming": ("Aim", "aim", "aim_at_floor", "aim_detection", "aim_from_image", "aim_with_covariance",
-        "detection_sigmas", "floor_from_detections"),
+        "detection_sigmas", "floor_from_detections", "height_coupling"),
     "calibration": ("GLOBAL_NAMES", "PARAM_NAMES", "PARAM_UNITS", "RIM_NAMES", "CalibrationProblem",
         "Observations", "RigFit", "RimEdges", "RimFit", "RimPrior", "SimulationSettings",
         "draw_calibration_truth", "fit_circle", "fit_rig", "fit_rim", "rim_edges", "simulate_calibration",

@@ -9,5 +9,6 @@ from ._aim import (
     aim_with_covariance as aim_with_covariance,
     detection_sigmas as detection_sigmas,
     floor_from_detections as floor_from_detections,
+    height_coupling as height_coupling,
     input_covariance as input_covariance,
 )

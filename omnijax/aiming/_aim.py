@@ -132,36 +132,43 @@ def aim_with_covariance(rig: Rig, x: Float[Array, "9"], covariance: PointingCova
     return Aim(pointing=p, covariance=covariance, zooms=zooms, x=x, rule=rig.zoom_rule)
 
 
-def input_covariance(rig: Rig, cov_image: Float[Array, "2 2"], height_r_f=0.0) -> Float[Array, "9 9"]:
+def height_coupling(rig: Rig, height_r_f, from_head) -> Array:
+    """The foot's coupling to the person's height (px per metre above the prior's), the sigma rule's part:
+    all of ``height_r_f`` (:attr:`~omnijax.detection.Detections.height_r_f`, how a foot from the head
+    moves with the height) for a foot the head placed, the rig's fitted ``height_share_r_f`` of it for a
+    foot seen (eq 12's window of the prior's length slides along a taller person's change)."""
+    return jnp.where(jnp.asarray(from_head), 1.0, rig.detection.height_share_r_f) * jnp.asarray(height_r_f, float)
+
+
+def input_covariance(rig: Rig, cov_image: Float[Array, "2 2"], coupling=0.0) -> Float[Array, "9 9"]:
     """Covariance of the nine inputs: the foot's (r_f, theta_f) block, then the rig's calibration
     sigmas and the person priors, independent but for the foot's radius and the height.
 
-    A foot whose error follows the person's height (``height_r_f`` px per metre above the prior's:
-    :attr:`~omnijax.detection.Detections.height_r_f`) errs with the opposite sign to the aim's height,
-    the prior's: ``cov(r_f, H_p) = -height_r_f sigma_H_p^2``, held to a correlation of at most 1 in
-    size against the block's ``var(r_f)`` (the sigma rule may have narrowed the radius below the
-    height's own part)."""
+    A foot whose error follows the person's height (``coupling`` px per metre above the prior's:
+    :func:`height_coupling`) errs with the opposite sign to the aim's height, the prior's:
+    ``cov(r_f, H_p) = -coupling sigma_H_p^2``, held to a correlation of at most 1 in size against the
+    block's ``var(r_f)`` (the sigma rule may have narrowed the radius below the height's own part)."""
     sig = rig.input_sigma(0.0, 0.0)
     h = INPUT_NAMES.index("H_p")
     bound = jnp.sqrt(jnp.maximum(cov_image[0, 0], 0.0)) * sig[h]
-    cross = jnp.clip(-jnp.asarray(height_r_f, float) * sig[h] ** 2, -bound, bound)
+    cross = jnp.clip(-jnp.asarray(coupling, float) * sig[h] ** 2, -bound, bound)
     return jnp.diag(sig**2).at[:2, :2].set(cov_image).at[0, h].set(cross).at[h, 0].set(cross)
 
 
 @functools.partial(jax.jit, static_argnames="rules")
 def aim_from_image(rig: Rig, r_f, theta_f, cov_image: Float[Array, "2 2"],
-                   rules: tuple[str, ...] | None = None, zero_sigma=None, height_r_f=0.0) -> Aim:
+                   rules: tuple[str, ...] | None = None, zero_sigma=None, coupling=0.0) -> Aim:
     """The core: pan/tilt/zoom at the head of the person whose foot is seen at (``r_f`` px,
     ``theta_f`` rad) with covariance ``cov_image`` (2 x 2, px and rad).
 
-    The pointing covariance is ``J Sigma J^T`` (autodiff) over :func:`input_covariance` (``height_r_f``:
-    the foot's coupling to the person's height, px per metre).
+    The pointing covariance is ``J Sigma J^T`` (autodiff) over :func:`input_covariance` (``coupling``:
+    the foot's coupling to the person's height, px per metre, :func:`height_coupling`).
     ``zero_sigma``: sigmas (rad) of the PTZ's pan and tilt zero offsets, added to it (the nine
     inputs do not include them; calibration reports them). ``rules``: zoom rules computed beside
     the rig's (e.g. :data:`~omnijax.zoom.ZOOM_RULES`).
     """
     x = rig.input_mean(r_f, theta_f)
-    cov = pointing_covariance_full(x, input_covariance(rig, cov_image, height_r_f), rig.omni.profile)
+    cov = pointing_covariance_full(x, input_covariance(rig, cov_image, coupling), rig.omni.profile)
     if zero_sigma is not None:
         p = pointing(x, rig.omni.profile)
         cov = PointingCovariance(cov=with_mounting_sigma(cov.cov, p.pan, p.tilt, *zero_sigma), valid=cov.valid)
@@ -171,13 +178,14 @@ def aim_from_image(rig: Rig, r_f, theta_f, cov_image: Float[Array, "2 2"],
 @functools.partial(jax.jit, static_argnames="rules")
 def aim_detection(rig: Rig, r_f, theta_f, sigma_r_f=None, sigma_theta_f=None,
                   rules: tuple[str, ...] | None = None, zero_sigma=None, bound_r_f=0.0, bound_theta_f=0.0,
-                  height_r_f=0.0) -> Aim:
+                  height_r_f=0.0, from_head=False) -> Aim:
     """Pan/tilt/zoom for a detection at (``r_f`` px, ``theta_f`` rad) with the detector's sigmas
     (and bound parts), under the sigma rule (:func:`detection_sigmas`; ``None``: the rig's defaults),
-    the foot's coupling to the height ``height_r_f`` (px per metre; :func:`input_covariance`)."""
+    the foot coupled to the person's height by ``height_r_f`` and ``from_head`` (:func:`height_coupling`)."""
     s_r, s_t = detection_sigmas(rig, sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f,
                                 None if sigma_r_f is None else r_f)
-    return aim_from_image(rig, r_f, theta_f, jnp.diag(jnp.stack([s_r**2, s_t**2])), rules, zero_sigma, height_r_f)
+    return aim_from_image(rig, r_f, theta_f, jnp.diag(jnp.stack([s_r**2, s_t**2])), rules, zero_sigma,
+                          height_coupling(rig, height_r_f, from_head))
 
 
 @functools.partial(jax.jit, static_argnames="rules")

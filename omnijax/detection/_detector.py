@@ -123,9 +123,10 @@ class Detections(eqx.Module):
     the quality part, which the sigma rule scales, and ``bound_r_f``, ``bound_theta_f`` the bound
     part of a foot the detector could not see (the person reaches past the sampled radii), which it
     adds as it is (:func:`omnijax.aiming.detection_sigmas`); ``height_r_f`` (px per metre) how far
-    the foot's radius moves with the person's height above the prior's (a foot placed from the head
-    with the prior's height; 0 for a foot seen: :func:`_foot_sigmas`), so the aim's height prior errs
-    against it (:func:`omnijax.aiming.input_covariance`);
+    the foot's radius moves with the person's height above the prior's when the head's top and the
+    prior's height place it (:attr:`PolarIndex.hyp_dr_f_dH` at the foot), and ``from_head`` whether
+    they did (:func:`_foot_sigmas`): the aim's height prior errs against it
+    (:func:`omnijax.aiming.height_coupling`);
     ``contrast`` is the non-centrality per sample measured on the profile (over the samples no
     stronger person explained); ``r_in``/``r_out`` (px) the person's radial extent (the foot
     hypothesis's, or eq 12's where the foot moved out to a head seen in brightness alone,
@@ -147,6 +148,7 @@ class Detections(eqx.Module):
     bound_r_f: Float[Array, " K"]
     bound_theta_f: Float[Array, " K"]
     height_r_f: Float[Array, " K"]
+    from_head: Bool[Array, " K"]
     contrast: Float[Array, " K"]
     r_in: Float[Array, " K"]
     r_out: Float[Array, " K"]
@@ -245,15 +247,13 @@ def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0,
     px (``PolarIndex.hyp_dr_f_dH``, by autodiff; 0.05-0.19 m on the floor from 1 to 3.8 m out in the
     paper's rig): a foot the detector did not see, so a bound part too.
 
-    ``height_r_f`` (px per metre of the person's height above the prior's) is how the foot's error
-    follows the height: for a foot from the head, ``hyp_dr_f_dH``, the height part of its bound. The
-    aim's height is the prior's too, wrong by the same amount the other way, so the two errors are
-    correlated, not independent (:func:`omnijax.aiming.input_covariance`); on the fisheye rig they
-    cancel in the tilt by a half and more (docs/validation.md). A seen foot's error follows the height
-    less (eq 12's window has the prior's length; the regression on Table 1's trials is 8-34 px a metre
-    against 106-120 from the head on the fisheye rig) and is not coupled: 0. (The foot's Monte Carlo
-    puts it at about half the head's slope, twice what the trials show, and narrowed the tilt's
-    prediction to a singular one.)
+    ``height_r_f`` (px per metre of the person's height above the prior's) is how a foot from the
+    head follows the height, ``hyp_dr_f_dH``: the height part of its bound. The aim's height is the
+    prior's too, wrong by the same amount the other way, so the two errors are correlated, not
+    independent (:func:`omnijax.aiming.height_coupling`); on the fisheye rig they cancel in the tilt
+    by a half and more (docs/validation.md). A seen foot follows the height less (eq 12's window has
+    the prior's length): the sigma rule's fitted share of ``height_r_f``. (The foot's Monte Carlo puts
+    that share at about one half, against a third in the walking scenes and less on Table 1's trials.)
     """
     polar = detector.polar
     step = 2 * jnp.pi / polar.n_theta
@@ -274,8 +274,7 @@ def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0,
     height = detector.sigma_H_p * dr_f_dH
     bound_r = jnp.where(from_head, jnp.sqrt(bound_r**2 + height**2), bound_r)
     bound_theta = jnp.where(blind, BLIND_THETA_SIGMA, 0.0)
-    height_r_f = jnp.where(from_head, dr_f_dH, 0.0)
-    return sigma_r, sigma_theta, bound_r, bound_theta, height_r_f
+    return sigma_r, sigma_theta, bound_r, bound_theta, dr_f_dH
 
 
 def find_sectors(detector: Detector, M: Float[Array, " T"]):
@@ -304,8 +303,9 @@ def detections_of(detector: Detector, people: People, d2: Float[Array, "T R"]) -
     i = jnp.where(jnp.any(two, 1), i_own, foot)
     i_extent = jnp.where(jnp.any(two, 1), i_own, people.i)  # what the background's life reads the sides over
     width = (people.last - people.first + 1) * step
+    from_head = people.head_only | people.from_head
     sigma_r, sigma_theta, bound_r, bound_theta, height_r_f = _foot_sigmas(
-        detector, i, people.contrast, width, people.visible, people.head_only | people.from_head)
+        detector, i, people.contrast, width, people.visible, from_head)
     first = polar.hyp_first
     xy = floor(i)
     person = a_person(polar, people, i)
@@ -313,7 +313,7 @@ def detections_of(detector: Detector, people: People, d2: Float[Array, "T R"]) -
     strip = merge_fragments(people.valid, xy, i == first, polar.hyp_R[first]) & ~person
     return Detections(
         valid=valid, r_f=polar.hyp_r_f[i], theta_f=theta_f, sigma_r_f=sigma_r, sigma_theta_f=sigma_theta,
-        bound_r_f=bound_r, bound_theta_f=bound_theta, height_r_f=height_r_f,
+        bound_r_f=bound_r, bound_theta_f=bound_theta, height_r_f=height_r_f, from_head=from_head,
         contrast=people.contrast, r_in=polar.radii[i_extent], r_out=polar.radii[0] + polar.hyp_out[i_extent],
         theta_l=wrap_2pi(people.first * step), theta_r=wrap_2pi(people.last * step), peak=people.excess,
         region=people.explained, strip=strip,

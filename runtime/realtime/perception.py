@@ -238,14 +238,16 @@ class Perception:
 
 def people_lines(rig: Rig, dets, valid: np.ndarray) -> list[dict]:
     """The per-person objects of ``detections.jsonl`` (r_f, theta_f, the sigma rule's sigmas and the
-    detector's own, the foot's coupling to the height, contrast, run edges, radial extent)."""
+    detector's own, how the foot from the head moves with the height and whether the head placed it,
+    contrast, run edges, radial extent)."""
     s_r, s_t = (np.asarray(a) for a in detection_sigmas(rig, dets.sigma_r_f, dets.sigma_theta_f, dets.bound_r_f,
                                                         dets.bound_theta_f, dets.r_f))
     return [{"r_f": float(dets.r_f[k]), "theta_f": float(dets.theta_f[k]), "sigma_r_f": float(s_r[k]),
              "sigma_theta_f": float(s_t[k]), "detector_sigma_r_f": float(dets.sigma_r_f[k]),
              "detector_sigma_theta_f": float(dets.sigma_theta_f[k]), "detector_bound_r_f": float(dets.bound_r_f[k]),
              "detector_bound_theta_f": float(dets.bound_theta_f[k]),
-             "detector_height_r_f": float(dets.height_r_f[k]), "contrast": float(dets.contrast[k]),
+             "detector_height_r_f": float(dets.height_r_f[k]), "detector_from_head": bool(dets.from_head[k]),
+             "contrast": float(dets.contrast[k]),
              "theta_l": float(dets.theta_l[k]), "theta_r": float(dets.theta_r[k]),
              "r_in": float(dets.r_in[k]), "r_out": float(dets.r_out[k])} for k in valid]
 

@@ -220,6 +220,7 @@ class Matched(eqx.Module):
     bound_r_f: jax.Array
     bound_theta_f: jax.Array
     height_r_f: jax.Array
+    from_head: jax.Array
     contrast: jax.Array
 
 
@@ -233,7 +234,7 @@ def match(dets: Detections, theta_true) -> tuple[Matched, jax.Array]:
     m = Matched(found=covers.any(), r_f=dets.r_f[k], r_in=dets.r_in[k], theta_f=dets.theta_f[k],
                 sigma_r_f=dets.sigma_r_f[k], sigma_theta_f=dets.sigma_theta_f[k], bound_r_f=dets.bound_r_f[k],
                 bound_theta_f=dets.bound_theta_f[k], height_r_f=dets.height_r_f[k],
-                contrast=dets.contrast[k])
+                from_head=dets.from_head[k], contrast=dets.contrast[k])
     return m, jnp.sum(dets.valid) - covers.any()
 
 
@@ -418,16 +419,17 @@ def fixed_rig(rig: Rig) -> Rig:
 
 
 @jax.jit
-def _pointing_stats(rig: Rig, r_f, theta_f, sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f, height_r_f):
+def _pointing_stats(rig: Rig, r_f, theta_f, sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f, height_r_f,
+                    from_head):
     """Per detection, through the aim pipeline (the sigma rule and the foot's coupling to the height
     included): sin pan, tan tilt and their predicted variances, pan, tilt and their predicted 2 x 2
     covariance."""
-    def one(r, t, sr, st, br, bt, h):
-        a = aim_detection(rig, r, t, sr, st, bound_r_f=br, bound_theta_f=bt, height_r_f=h)
+    def one(r, t, sr, st, br, bt, h, fh):
+        a = aim_detection(rig, r, t, sr, st, bound_r_f=br, bound_theta_f=bt, height_r_f=h, from_head=fh)
         p, c = a.pointing, a.covariance
         return p.sin_pan, p.tan_tilt, c.var_sin_pan, c.var_tan_tilt, p.pan, p.tilt, c.cov[:2, :2]
 
-    return jax.vmap(one)(r_f, theta_f, sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f, height_r_f)
+    return jax.vmap(one)(r_f, theta_f, sigma_r_f, sigma_theta_f, bound_r_f, bound_theta_f, height_r_f, from_head)
 
 
 @jax.jit
@@ -492,7 +494,7 @@ def errors(pred_rig: Rig, rig: Rig, t: Trials) -> Errors:
         empty = {q: np.zeros(0) for q in QUANTITIES}
         return Errors(pred=empty, err=empty, nees=np.zeros(0), pan_sq=np.zeros(0), tilt_sq=np.zeros(0))
     det = [np.asarray(a)[f] for a in (d.r_f, d.theta_f, d.sigma_r_f, d.sigma_theta_f, d.bound_r_f, d.bound_theta_f,
-                                      d.height_r_f)]
+                                      d.height_r_f, d.from_head)]
     sp, tt, vsp, vtt, pan, tilt, cov2 = _padded(_pointing_stats, pred_rig, *det)
     true_sp, true_tt, true_pan, true_tilt = _padded(_true_pointing, rig, np.asarray(t.x_true)[f])
     v, pan_sq, tilt_sq = (np.asarray(a) for a in pointing_errors(pan, tilt, cov2, true_pan, true_tilt))
@@ -646,7 +648,8 @@ def _contained(rig: Rig, t: Trials, p_contain):
 
     def one(det, head, R_h, true_rig):
         a = aim_detection(rig, det.r_f, det.theta_f, det.sigma_r_f, det.sigma_theta_f, ZOOM_RULES,
-                          bound_r_f=det.bound_r_f, bound_theta_f=det.bound_theta_f, height_r_f=det.height_r_f)
+                          bound_r_f=det.bound_r_f, bound_theta_f=det.bound_theta_f, height_r_f=det.height_r_f,
+                          from_head=det.from_head)
         out = []
         for rule in ZOOM_RULES:
             z = a.zooms[rule]

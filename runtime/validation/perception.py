@@ -269,7 +269,8 @@ class PerceptionScore:
     #: per matched detection: the true foot's floor radius (m), the errors of r_f (px) and theta_f (rad)
     #: and the detector's own sigmas and bound parts (before the rule): what benchmarks/fit_detection_sigmas.py
     #: fits; then what may explain an error: the true r_f (px), the detection's contrast, run width (rad),
-    #: r_in and r_out (px), whether the person was moving, the person's height (m)
+    #: r_in and r_out (px), whether the person was moving, the person's height (m), the detector's coupling of
+    #: the foot to the height (px a metre: ``Detections.height_r_f``) and whether the head placed it
     records: list = field(default_factory=list)
 
     def add_frame(self, frame: int, truth: dict, people: list[dict], z: np.ndarray, sigmas: np.ndarray,
@@ -302,7 +303,8 @@ class PerceptionScore:
                                  float(q["r_f"]), float(p.get("contrast", 0.0)),
                                  float(wrap_pi(p["theta_r"] - p["theta_l"])), float(p.get("r_in", 0.0)),
                                  float(p.get("r_out", 0.0)), float(q.get("moving", False)),
-                                 float(q.get("H_p_m", math.nan))))
+                                 float(q.get("H_p_m", math.nan)), float(p.get("detector_height_r_f", 0.0)),
+                                 float(p.get("detector_from_head", False))))
         out = {"missed": [], "false": []}
         unmatched = [k for k in range(len(people)) if k not in person_of]
         for c, q in enumerate(persons):

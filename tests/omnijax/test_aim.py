@@ -329,7 +329,7 @@ def test_a_foot_from_the_head_is_coupled_to_the_height(fisheye_rig):
         x_true = rig.input_mean(jnp.full(n, foot(R)), jnp.full(n, theta)).at[:, 7].set(jnp.asarray(H))
         mse = float(np.mean(np.asarray(tan_tilt(x_used) - tan_tilt(x_true)) ** 2))
         cov = jnp.diag(jnp.array([(c * s_H) ** 2, 1e-12]))
-        coupled, independent = (float(aim_from_image(rig, foot(R), theta, cov, height_r_f=h).covariance.var_tan_tilt)
+        coupled, independent = (float(aim_from_image(rig, foot(R), theta, cov, coupling=h).covariance.var_tan_tilt)
                                 for h in (c, 0.0))
         assert coupled / mse == pytest.approx(1.0, abs=0.10), (R, theta)
         assert independent / mse > 1.4, (R, theta)
@@ -346,3 +346,16 @@ def test_the_coupling_stays_a_covariance(paper_rig):
         np.testing.assert_array_equal(s, s.T)
     s = np.asarray(input_covariance(paper_rig, jnp.diag(jnp.array([4.0, 1e-4])), 20.0))  # correlation 0.5
     assert s[0, 7] == pytest.approx(-20.0 * float(paper_rig.sigmas.H_p) ** 2)
+
+
+def test_the_rule_couples_a_foot_from_the_head_fully_and_a_seen_one_by_its_share(paper_rig):
+    from omnijax import height_coupling
+
+    rig = eqx.tree_at(lambda r: r.detection.height_share_r_f, paper_rig, jnp.asarray(0.25))
+    got = np.asarray(height_coupling(rig, jnp.array([80.0, 80.0]), jnp.array([True, False])))
+    np.testing.assert_allclose(got, [80.0, 20.0], rtol=1e-15)
+    a, b = (aim_detection(rig, 90.0, 0.4, 2.0, 0.01, height_r_f=80.0, from_head=f) for f in (True, False))
+    c = aim_detection(eqx.tree_at(lambda r: r.detection.height_share_r_f, rig, jnp.asarray(1.0)), 90.0, 0.4, 2.0,
+                      0.01, height_r_f=80.0)
+    np.testing.assert_allclose(np.asarray(a.covariance.cov), np.asarray(c.covariance.cov), rtol=1e-12)
+    assert float(a.covariance.var_tan_tilt) != pytest.approx(float(b.covariance.var_tan_tilt), rel=1e-3)

@@ -65,7 +65,7 @@ def test_match_takes_the_sector_that_covers_the_person():
     z = jnp.zeros(3)
     dets = Detections(valid=jnp.array([True, True, False]), r_f=jnp.array([10.0, 20.0, 30.0]),
                       theta_f=jnp.array([1.0, 3.1, 0.5]), sigma_r_f=z + 1, sigma_theta_f=z + 0.01,
-                      bound_r_f=z, bound_theta_f=z, height_r_f=z, contrast=z + 9,
+                      bound_r_f=z, bound_theta_f=z, height_r_f=z, from_head=z > 0, contrast=z + 9,
                       r_in=z, r_out=z, theta_l=jnp.array([0.9, 3.0, 0.4]), theta_r=jnp.array([1.1, -3.0, 0.6]),
                       peak=z, region=jnp.zeros((3, 4), jnp.int32))
     m, others = e.match(dets, -3.1)  # the second sector wraps around +-pi
@@ -127,7 +127,7 @@ def _synthetic_trials(rig, n, key=0):
     x_true = np.asarray(rig.input_mean(true_r, true_t))
     z = np.zeros(n)
     det = e.Matched(found=np.ones(n, bool), r_f=r_f, r_in=r_f - 5, theta_f=th, sigma_r_f=s_r, sigma_theta_f=s_t,
-                    bound_r_f=z, bound_theta_f=z, height_r_f=z, contrast=z + 100)
+                    bound_r_f=z, bound_theta_f=z, height_r_f=z, from_head=z > 0, contrast=z + 100)
     return e.Trials(det=det, x_true=x_true, r_inner=true_r - 5, head=np.zeros((n, 3)), R_h=z + 0.1,
                     true_rig=jax.tree.map(lambda a: np.broadcast_to(np.asarray(a), (n, *np.shape(a))), rig),
                     others=z.astype(int), lines_over=z.astype(int))
