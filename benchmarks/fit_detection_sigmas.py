@@ -20,7 +20,8 @@ isolated = no other person within 0.35 rad), and
   error counts, so the NEES is honest over all detections; ``--outliers`` mixes in a uniform
   outlier share and prints it: errors the detector's quality features do not flag), printing the
   TOML lines for the rig's ``[detection]``; from ``--records`` that carry the people's true heights,
-  also ``height_share_r_f``, a seen foot's coupling to the height (:func:`fit_height_share`);
+  also ``height_share_r_f`` and ``height_share_head_r_f``, a seen foot's and a foot from the head's
+  coupling to the height (:func:`fit_height_share`);
 - ``score``: the normalised estimation error squared of r_f and theta_f under the rig's rule
   (mean and share above 6.63, the chi-square(1) 99 % point), overall and for isolated people,
   per folder pair and pooled.
@@ -155,16 +156,17 @@ def from_records(paths: list[Path]) -> dict[str, np.ndarray]:
     return {**data, "R": a[:, 0]}  # the true foot's floor distance
 
 
-def fit_height_share(rig, data: dict[str, np.ndarray]) -> tuple[float, int]:
-    """The sigma rule's ``height_share_r_f`` (:func:`omnijax.aiming.height_coupling`): the least-squares slope,
-    through 0, of the seen feet's r_f errors on ``height_r_f * (H - H_p)`` (what a foot from the head would have
-    moved for the person's true height ``H``), held to [0, 1]; and the number of seen feet it used. Needs
-    records with the true heights (``perception_sweep.py --records`` of this version); ``nan`` without."""
+def fit_height_share(rig, data: dict[str, np.ndarray], from_head: bool) -> tuple[float, int]:
+    """The sigma rule's ``height_share_r_f`` (seen feet) or ``height_share_head_r_f`` (``from_head``: feet the
+    head placed; :func:`omnijax.aiming.height_coupling`): the least-squares slope, through 0, of those feet's
+    r_f errors on ``height_r_f * (H - H_p)`` (what the geometry moves a foot from the head for the person's true
+    height ``H``), held to [0, 1]; and the number of feet it used. Needs records with the true heights
+    (``perception_sweep.py --records`` of this version); ``nan`` without."""
     if "H" not in data:
         return math.nan, 0
-    seen = ~data["from_head"] & np.isfinite(data["H"])
-    x = data["height_r_f"][seen] * (data["H"][seen] - float(rig.person.H_p))
-    return float(np.clip(np.sum(data["e_r"][seen] * x) / max(np.sum(x * x), 1e-300), 0.0, 1.0)), int(seen.sum())
+    use = (data["from_head"] == from_head) & np.isfinite(data["H"])
+    x = data["height_r_f"][use] * (data["H"][use] - float(rig.person.H_p))
+    return float(np.clip(np.sum(data["e_r"][use] * x) / max(np.sum(x * x), 1e-300), 0.0, 1.0)), int(use.sum())
 
 
 def floor_distances(rig, data: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -228,12 +230,14 @@ def main() -> int:
         R, _ = floor_distances(rig, data)
         g_r, x_r, k_r, o_r = fit_component(data["e_r"], data["s_r"], data["b_r"], args.outliers, R)
         g_t, x_t, k_t, o_t = fit_component(data["e_t"], data["s_t"], data["b_t"], args.outliers, 1.0 / R)
-        share, n_seen = fit_height_share(rig, data)
+        (share, n_seen), (share_head, n_head) = (fit_height_share(rig, data, h) for h in (False, True))
         print(json.dumps({"detections": int(data["e_r"].size), "isolated": int(data["isolated"].sum()),
-                          "outlier_share_r_f": o_r, "outlier_share_theta_f": o_t, "height_share_feet": n_seen}))
+                          "outlier_share_r_f": o_r, "outlier_share_theta_f": o_t, "height_share_feet": n_seen,
+                          "height_share_head_feet": n_head}))
         print(f"sigma_gain_r_f = {g_r:.4g}\nsigma_extra_r_f = {x_r:.4g}\nsigma_extra_r_f_per_m = {k_r:.4g}\n"
               f"sigma_gain_theta_f = {g_t:.4g}\nsigma_extra_theta_f_deg = {math.degrees(x_t):.4g}\n"
-              f"sigma_lateral_m = {k_t:.4g}" + (f"\nheight_share_r_f = {share:.4g}" if n_seen else ""))
+              f"sigma_lateral_m = {k_t:.4g}" + (f"\nheight_share_r_f = {share:.4g}" if n_seen else "")
+              + (f"\nheight_share_head_r_f = {share_head:.4g}" if n_head else ""))
         return 0
     per = {f"{r.name}": score(rig, matched(r, d)) for r, d in pairs}
     per["pooled"] = score(rig, pooled(pairs))

@@ -133,11 +133,15 @@ def aim_with_covariance(rig: Rig, x: Float[Array, "9"], covariance: PointingCova
 
 
 def height_coupling(rig: Rig, height_r_f, from_head) -> Array:
-    """The foot's coupling to the person's height (px per metre above the prior's), the sigma rule's part:
-    all of ``height_r_f`` (:attr:`~omnijax.detection.Detections.height_r_f`, how a foot from the head
-    moves with the height) for a foot the head placed, the rig's fitted ``height_share_r_f`` of it for a
-    foot seen (eq 12's window of the prior's length slides along a taller person's change)."""
-    return jnp.where(jnp.asarray(from_head), 1.0, rig.detection.height_share_r_f) * jnp.asarray(height_r_f, float)
+    """The foot's coupling to the person's height (px per metre above the prior's), the sigma rule's part: a
+    share of ``height_r_f`` (:attr:`~omnijax.detection.Detections.height_r_f`, how the geometry moves a foot
+    that the head's top and the prior's height placed), the rig's fitted ``height_share_head_r_f`` for a
+    foot the head placed (1: the geometry's; the head's top is found with the height too), and
+    ``height_share_r_f`` for a foot seen (eq 12's window of the prior's length slides along a taller
+    person's change)."""
+    d = rig.detection
+    share = jnp.where(jnp.asarray(from_head), d.height_share_head_r_f, d.height_share_r_f)
+    return share * jnp.asarray(height_r_f, float)
 
 
 def input_covariance(rig: Rig, cov_image: Float[Array, "2 2"], coupling=0.0) -> Float[Array, "9 9"]:

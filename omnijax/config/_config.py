@@ -149,7 +149,8 @@ class Detection(eqx.Module):
     The sigma rule: a detection's sigma is ``sqrt((sigma_gain * detector's)^2 + bound^2 + sigma_extra^2
     + range term^2)`` per coordinate (``sigma_extra_theta_f`` in rad; the range terms
     ``sigma_extra_r_f_per_m * R`` px and ``sigma_lateral_m / R`` rad at the foot's floor distance ``R``),
-    and a seen foot's coupling to the person's height, ``height_share_r_f`` of a foot from the head's
+    and the foot's coupling to the person's height, ``height_share_r_f`` (a seen foot) and
+    ``height_share_head_r_f`` (a foot from the head) of what the geometry moves a foot from the head
     (:func:`omnijax.aiming.height_coupling`), fitted by benchmarks/fit_detection_sigmas.py; without
     a detection (layout optimiser, calibration points, ``omnijax variance``) ``sigma_r_f`` and
     ``sigma_theta_f`` are used as they are.
@@ -180,6 +181,7 @@ class Detection(eqx.Module):
     sigma_extra_r_f_per_m: Float[Array, ""] = eqx.field(default=0.0, converter=jnp.asarray)
     sigma_lateral_m: Float[Array, ""] = eqx.field(default=0.0, converter=jnp.asarray)
     height_share_r_f: Float[Array, ""] = eqx.field(default=0.0, converter=jnp.asarray)
+    height_share_head_r_f: Float[Array, ""] = eqx.field(default=1.0, converter=jnp.asarray)
     background_seconds: float = eqx.field(static=True, default=10.0)
     still_s: float = eqx.field(static=True, default=0.3)
     ghost_s: float = eqx.field(static=True, default=0.4)
@@ -533,6 +535,9 @@ class DetectionSection(Section):
     height_share_r_f: Annotated[float, Field(ge=0, le=1)] = Field(
         0.0, description="sigma rule: a seen foot's coupling to the person's height, as a share of a foot "
                          "placed from the head's (d r_f / d H); 0: not coupled")
+    height_share_head_r_f: Annotated[float, Field(ge=0, le=1)] = Field(
+        1.0, description="sigma rule: a foot placed from the head's top with the prior's height, its coupling to "
+                         "the person's height as a share of what the geometry says (d r_f / d H); 1: all of it")
     c_min: Annotated[float, within(0.0, MAX_CONTRAST, "a non-centrality per pixel", open_low=True,
                                    why="more than two 8-bit colours' chromaticities can differ by")] = Field(
         4.0, description="smallest person contrast (non-centrality per pixel) x_m holds for")
@@ -876,7 +881,7 @@ def parse_rig(
         sigma_gain_theta_f=_a(de.sigma_gain_theta_f),
         sigma_extra_theta_f=_a(math.radians(de.sigma_extra_theta_f_deg)),
         sigma_extra_r_f_per_m=_a(de.sigma_extra_r_f_per_m), sigma_lateral_m=_a(de.sigma_lateral_m),
-        height_share_r_f=_a(de.height_share_r_f),
+        height_share_r_f=_a(de.height_share_r_f), height_share_head_r_f=_a(de.height_share_head_r_f),
         background_seconds=de.background_seconds, still_s=de.still_s, ghost_s=de.ghost_s,
         floor_shows_s=de.floor_shows_s,
         ghost_edge=de.ghost_edge, noise_margin=_a(de.noise_margin), absorb_s=de.absorb_s,

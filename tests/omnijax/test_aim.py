@@ -348,14 +348,15 @@ def test_the_coupling_stays_a_covariance(paper_rig):
     assert s[0, 7] == pytest.approx(-20.0 * float(paper_rig.sigmas.H_p) ** 2)
 
 
-def test_the_rule_couples_a_foot_from_the_head_fully_and_a_seen_one_by_its_share(paper_rig):
+def test_the_rule_couples_a_foot_by_its_share_seen_or_from_the_head(paper_rig):
     from omnijax import height_coupling
 
-    rig = eqx.tree_at(lambda r: r.detection.height_share_r_f, paper_rig, jnp.asarray(0.25))
+    shares = lambda r: (r.detection.height_share_r_f, r.detection.height_share_head_r_f)
+    rig = eqx.tree_at(shares, paper_rig, (jnp.asarray(0.25), jnp.asarray(0.75)))
     got = np.asarray(height_coupling(rig, jnp.array([80.0, 80.0]), jnp.array([True, False])))
-    np.testing.assert_allclose(got, [80.0, 20.0], rtol=1e-15)
+    np.testing.assert_allclose(got, [60.0, 20.0], rtol=1e-15)
     a, b = (aim_detection(rig, 90.0, 0.4, 2.0, 0.01, height_r_f=80.0, from_head=f) for f in (True, False))
-    c = aim_detection(eqx.tree_at(lambda r: r.detection.height_share_r_f, rig, jnp.asarray(1.0)), 90.0, 0.4, 2.0,
+    c = aim_detection(eqx.tree_at(lambda r: r.detection.height_share_r_f, rig, jnp.asarray(0.75)), 90.0, 0.4, 2.0,
                       0.01, height_r_f=80.0)
     np.testing.assert_allclose(np.asarray(a.covariance.cov), np.asarray(c.covariance.cov), rtol=1e-12)
     assert float(a.covariance.var_tan_tilt) != pytest.approx(float(b.covariance.var_tan_tilt), rel=1e-3)
