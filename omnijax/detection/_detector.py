@@ -253,7 +253,7 @@ def _foot_sigmas(detector: Detector, i, contrast, width, visible=1.0,
     independent (:func:`omnijax.aiming.height_coupling`); on the fisheye rig they cancel in the tilt
     by a half and more (docs/validation.md). A seen foot follows the height less (eq 12's window has
     the prior's length): the sigma rule's fitted share of ``height_r_f``. (The foot's Monte Carlo puts
-    that share at about one half, against a third in the walking scenes and less on Table 1's trials.)
+    that share at about one half, against 0.16-0.31 fitted in the walking scenes.)
     """
     polar = detector.polar
     step = 2 * jnp.pi / polar.n_theta

@@ -150,14 +150,14 @@ def _geometry_tables(rig: Rig, radii, theta):
     R_floor = floor_radius(radii, omni.r_m, omni.H_o, omni.profile)[0]
     rho = body_radius(rig)
     R_seen = R_floor + 0.25 * jnp.pi * rho
-    outer = lambda H_p: person_image_extent(R_seen, omni, H_p, rig.person.R_h, rho)[1]
-    r_out, dout_dH = jax.jvp(outer, (rig.person.H_p,), (jnp.ones_like(rig.person.H_p),))
+    outer = lambda R, H_p: person_image_extent(R, omni, H_p, rig.person.R_h, rho)[1]
+    H_p = rig.person.H_p
+    r_out, dout_dH = jax.jvp(lambda H: outer(R_seen, H), (H_p,), (jnp.ones_like(H_p),))
+    dout_dR = jax.jvp(lambda R: outer(R, H_p), (R_seen,), (jnp.ones_like(R_seen),))[1]
     width = 2 * jnp.arcsin(jnp.minimum(rho / R_seen, 1.0))  # a vertical cylinder's azimuth span
     R_axis = R_floor + rho
     foot = lambda R: point_image_radius(R, 0.0, omni.r_m, omni.H_o, omni.profile)
     r_f, dr_f_dR = jax.jvp(foot, (R_axis,), (jnp.ones_like(R_axis),))
-    dout_dR = jax.jvp(lambda R: person_image_extent(R, omni, rig.person.H_p, rig.person.R_h, rho)[1],
-                      (R_seen,), (jnp.ones_like(R_seen),))[1]
     dr_f_dH = dout_dH / dout_dR * dr_f_dR
     r_head = point_image_radius(R_axis, SHOULDER * rig.person.H_p, omni.r_m, omni.H_o, omni.profile)
     return x, y, R_floor, r_out, r_head, r_f, dout_dH, dr_f_dH, width, R_axis

@@ -282,30 +282,6 @@ def test_gradients_through_the_pipeline(paper_rig):
 
 
 
-def _from_head(rig, H_placed=None):
-    """A person's axis foot at floor radius ``R`` (m) and their height ``H`` to the image radius of the foot
-    that the head places with the prior's height (the person model of omnijax.geometry.person_image_extent,
-    inverted by bisection): the exact map a foot from the head is, independent of the detector's tables."""
-    from omnijax import person_image_extent, point_image_radius
-    from omnijax.detection._polar import body_radius
-
-    o, rho, R_h = rig.omni, float(body_radius(rig)), float(rig.person.R_h)
-    H_placed = float(rig.person.H_p) if H_placed is None else H_placed
-    outer = lambda R, H: person_image_extent(R, o, H, R_h, rho)[1]
-    foot = lambda R: point_image_radius(R, 0.0, o.r_m, o.H_o, o.profile)
-
-    def placed(R, H):
-        out = outer(jnp.asarray(R, float), jnp.asarray(H, float))
-        lo, hi = jnp.zeros_like(out), jnp.full_like(out, 20.0)
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            big = outer(mid, H_placed) > out
-            lo, hi = jnp.where(big, lo, mid), jnp.where(big, mid, hi)
-        return foot(0.5 * (lo + hi))
-
-    return placed, foot
-
-
 def test_a_foot_from_the_head_is_coupled_to_the_height(fisheye_rig):
     """A foot placed from the head's top with the prior's height errs with the person's height, and the aim's
     height (the prior's) errs the other way: the prediction with ``cov(r_f, H_p) = -height_r_f sigma_H^2``
@@ -313,11 +289,14 @@ def test_a_foot_from_the_head_is_coupled_to_the_height(fisheye_rig):
     standard error about 2.2 %) within 10 %; without it the tilt is over-predicted 1.5-3x. The fisheye rig,
     calibration and head-radius sigmas zero (only the height varies), a person 3 m out behind the omni
     axis from the PTZ and 2.5 m out to its side."""
-    from omnijax import pointing
+    from omnijax import point_image_radius, pointing
     from runtime.validation.endtoend import fixed_rig
+    from tests.person_model import head_placed_foot
 
     rig = eqx.tree_at(lambda r: r.sigmas.R_h, fixed_rig(fisheye_rig), jnp.zeros_like(fisheye_rig.sigmas.R_h))
-    placed, foot = _from_head(rig)
+    placed = head_placed_foot(rig)
+    o = rig.omni
+    foot = lambda R: point_image_radius(R, 0.0, o.r_m, o.H_o, o.profile)
     H_p, s_H = float(rig.person.H_p), float(rig.sigmas.H_p)
     n = 4000
     H = H_p + s_H * np.random.default_rng(46).standard_normal(n)

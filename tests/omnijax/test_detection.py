@@ -800,29 +800,22 @@ def test_later_passes_recompute_only_a_band_of_lines(paper_detector, monkeypatch
 
 
 def test_a_foot_from_the_head_carries_its_height_coupling(paper_detector, paper_rig):
-    """A foot placed from the head's top moves ``dout/dH * dr_f/dout`` px a metre of the person's height: the
-    detector's tables (slopes over a few hypotheses) against the exact person model inverted by bisection
-    (tests/omnijax/test_aim.py), at the polar's convention (the window sees the body from ``pi rho / 4``
-    before the axis), within 5 %."""
-    from omnijax import person_image_extent, point_image_radius
+    """A foot placed from the head's top moves ``d r_f / d H`` px a metre of the person's height: the polar's
+    table (autodiff of the person model) against the person model inverted by bisection and differenced
+    (tests/person_model.py), at the polar's convention (the window sees the body from ``pi rho / 4`` before
+    the axis), within 0.1 % (the central difference's step, 1 mm of height)."""
     from omnijax.detection._detector import _foot_sigmas
     from omnijax.detection._polar import body_radius
+    from tests.person_model import head_placed_foot
 
-    polar, o = paper_detector.polar, paper_rig.omni
-    rho, R_h, H_p = float(body_radius(paper_rig)), float(paper_rig.person.R_h), float(paper_rig.person.H_p)
-    outer = lambda R, H: float(person_image_extent(R - rho + 0.25 * math.pi * rho, o, H, R_h, rho)[1])
-
-    def placed(R, H):  # the axis foot's image radius of the prior-height person with this outer end
-        out, lo, hi = outer(R, H), 0.0, 20.0
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (lo, mid) if outer(mid, H_p) > out else (mid, hi)
-        return float(point_image_radius(0.5 * (lo + hi), 0.0, o.r_m, o.H_o, o.profile))
+    polar = paper_detector.polar
+    H_p = float(paper_rig.person.H_p)
+    placed = head_placed_foot(paper_rig, (0.25 * math.pi - 1.0) * float(body_radius(paper_rig)))
 
     for R in (1.5, 2.5, 3.5):  # the same slope whether or not the head placed it: the rule decides the share
         i = int(np.argmin(np.abs(np.asarray(polar.hyp_R) - R)))
         R_i = float(polar.hyp_R[i])
-        exact = (placed(R_i, H_p + 1e-3) - placed(R_i, H_p - 1e-3)) / 2e-3
+        exact = float(placed(R_i, H_p + 1e-3) - placed(R_i, H_p - 1e-3)) / 2e-3
         args = (paper_detector, jnp.asarray(i), jnp.asarray(50.0), jnp.asarray(float(polar.hyp_width[i])))
-        assert float(_foot_sigmas(*args, from_head=True)[4]) == pytest.approx(exact, rel=0.05), R
+        assert float(_foot_sigmas(*args, from_head=True)[4]) == pytest.approx(exact, rel=1e-3), R
         assert float(_foot_sigmas(*args, from_head=False)[4]) == float(_foot_sigmas(*args, from_head=True)[4])
