@@ -194,18 +194,20 @@ def aim_detection(rig: Rig, r_f, theta_f, sigma_r_f=None, sigma_theta_f=None,
 
 @functools.partial(jax.jit, static_argnames="rules")
 def aim_at_floor(rig: Rig, xy: Float[Array, "2"], cov_xy: Float[Array, "2 2"] | None = None,
-                 rules: tuple[str, ...] | None = None, zero_sigma=None) -> Aim:
+                 rules: tuple[str, ...] | None = None, zero_sigma=None, coupling=0.0) -> Aim:
     """Pan/tilt/zoom at the head above floor point ``xy`` (m) whose covariance is ``cov_xy`` (2 x 2, m^2).
 
     The floor estimate (e.g. the tracker's prediction) goes back to the image as (r_f, theta_f)
-    with a full covariance and enters :func:`aim_from_image`. Without ``cov_xy``: a detection at
-    ``xy`` with the rig's default sigmas (the layout optimiser's and calibration's floor points).
+    with a full covariance and enters :func:`aim_from_image`, with ``coupling`` (px per metre: how the
+    estimate's foot radius follows the person's height, :func:`height_coupling` of the detection the
+    estimate took). Without ``cov_xy``: a detection at ``xy`` with the rig's default sigmas (the layout
+    optimiser's and calibration's floor points).
     """
     if cov_xy is None:
         rt = floor_to_image(rig, xy)
         return aim_detection(rig, rt[0], rt[1], None, None, rules, zero_sigma)
     rt, cov_rt = image_position(rig, jnp.asarray(xy, float), jnp.asarray(cov_xy, float))
-    return aim_from_image(rig, rt[0], rt[1], cov_rt, rules, zero_sigma)
+    return aim_from_image(rig, rt[0], rt[1], cov_rt, rules, zero_sigma, coupling)
 
 
 @functools.partial(jax.jit, static_argnames="method")

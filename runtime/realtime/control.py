@@ -13,8 +13,10 @@
    time from the pan/tilt of a first aim at the track as it is now; the zoom keeps adjusting
    meanwhile and does not lengthen the horizon), from the prediction's floor covariance plus the
    covariance of the detection the track took (a person's foot errors persist from frame to frame,
-   so the track is no surer than one detection), pan/tilt, their covariance, the zoom of every rule
-   and the face's width in pixels at that zoom.
+   so the track is no surer than one detection), with that detection's coupling of the foot's radius
+   to the person's height (:func:`~omnijax.aiming.height_coupling`: the same error persists in the
+   track, against the aim's height prior, as in ``omnijax validate``'s aims), pan/tilt, their
+   covariance, the zoom of every rule and the face's width in pixels at that zoom.
 
 The host then does the bookkeeping (:meth:`~runtime.realtime.tracker.Tracker.apply`), asks the
 target selector (one PTZ) or the assignment (several, :mod:`runtime.realtime.assignment`) which
@@ -31,6 +33,7 @@ import jax
 import jax.numpy as jnp
 
 from omnijax import Aim, Detector, Rig, aim_at_floor, detect, floor_from_detections
+from omnijax.aiming import height_coupling
 from omnijax.detection import set_aside_ghosts
 from omnijax.geometry import wrap_pi
 from omnijax.zoom import ZOOM_RULES, face_pixels
@@ -129,20 +132,24 @@ def control_step(detector: Detector, rig: Rig, frame, lines, slots, t, accel_sd,
     # covariance, built for independent errors, averages away (demo three_people 8711: the target's
     # floor error a median 3.8 times the filter's sd)
     R_taken = R[jnp.maximum(assign, 0)]
+    # and its foot's error follows the person's height as the detection's did (the same person, the same
+    # error): the aim's height prior errs against it (omnijax.aiming.height_coupling)
+    coupling_taken = height_coupling(rig, dets.height_r_f, dets.from_head)[jnp.maximum(assign, 0)]
 
-    def one(ptz, slew, x, P, R_det):
+    def one(ptz, slew, x, P, R_det, coupling):
         now = aim_at_floor(ptz, x[:2], P[:2, :2], ZOOM_RULES).pointing  # only pan/tilt are kept (the rest is dead)
         lead = jnp.where(slew.known, slew.latency_s + pan_tilt_slew_s(now.pan, now.tilt, slew.pan, slew.tilt,
                                                                       slew.pan_deg_s, slew.tilt_deg_s), 0.0)
         xp, Pp = kalman.predict(x, P, lead, accel_sd)
         floor_cov = Pp[:2, :2] + R_det
-        aimed = aim_at_floor(ptz, xp[:2], floor_cov, ZOOM_RULES)
+        aimed = aim_at_floor(ptz, xp[:2], floor_cov, ZOOM_RULES, coupling=coupling)
         face = {rule: face_pixels(ptz.foveal.lens, aimed.zooms[rule].zoom, aimed.pointing.slant, ptz.person.R_h)
                 for rule in ZOOM_RULES}
         return aimed, lead, jnp.sqrt(jnp.diagonal(floor_cov)), face
 
     def camera(ptz, slew):
-        return jax.vmap(functools.partial(one, ptz, slew))(x_new[aim_slot], P_new[aim_slot], R_taken[aim_slot])
+        return jax.vmap(functools.partial(one, ptz, slew))(x_new[aim_slot], P_new[aim_slot], R_taken[aim_slot],
+                                                           coupling_taken[aim_slot])
 
     aims, lead, floor_sd, face = jax.vmap(camera)(rig.ptz_stack(), slew)
     return Control(dets=dets, trace=trace, z=z, R=R, assign=assign, x=x_new, P=P_new, aim_slot=aim_slot,

@@ -57,10 +57,11 @@ def test_control_step_is_the_tracker_and_the_aim_pipeline_fused(paper_detector, 
     """The one per-frame call against its parts called one by one: a confirmed track near the painted
     person is updated as Tracker.step updates it, and aimed at as aim_at_floor aims at its head
     predicted over the slew time from the last command to where a first aim points, with the floor
-    covariance the prediction's plus the covariance of the detection the track took."""
+    covariance the prediction's plus the covariance of the detection the track took, and that
+    detection's coupling of the foot to the person's height."""
     import copy
 
-    from omnijax import aim_at_floor
+    from omnijax import aim_at_floor, height_coupling
     from omnijax.zoom import ZOOM_RULES
     from runtime.realtime import kalman
     from runtime.realtime.control import Slew, control_step, pan_tilt_slew_s
@@ -92,7 +93,11 @@ def test_control_step_is_the_tracker_and_the_aim_pipeline_fused(paper_detector, 
     lead = 0.03 + float(pan_tilt_slew_s(now.pan, now.tilt, *sent, 300.0, 125.0))
     assert lead > 0.0 and float(c.lead[0, 0]) == pytest.approx(lead, rel=1e-12)
     xp, Pp = kalman.predict(jnp.asarray(tr.x), jnp.asarray(tr.P), lead, 1.5)
-    want = aim_at_floor(paper_rig, xp[:2], Pp[:2, :2] + R[k], ZOOM_RULES)
+    coupling = height_coupling(paper_rig, dets.height_r_f[k], dets.from_head[k])
+    assert float(coupling) != 0.0  # the paper rig's shares are fitted: the coupling is carried, not zero
+    want = aim_at_floor(paper_rig, xp[:2], Pp[:2, :2] + R[k], ZOOM_RULES, coupling=coupling)
+    uncoupled = aim_at_floor(paper_rig, xp[:2], Pp[:2, :2] + R[k], ZOOM_RULES)
+    assert abs(float(want.covariance.cov[1, 1]) / float(uncoupled.covariance.cov[1, 1]) - 1) > 1e-4
     got = jax.tree.map(lambda a: a[0, 0], c.aims)  # the rig's one PTZ, the first confirmed track
     for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(want)):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-10, atol=1e-12)
